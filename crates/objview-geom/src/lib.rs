@@ -1,0 +1,17 @@
+//! Geometry layer of objview: triangle meshes loaded from real asset formats, their
+//! normalization to the unit ball (SPEC §1), ground-truth surface point clouds, camera poses
+//! (SPEC §2) and the built-in procedural objects.
+//!
+//! Everything downstream (renderer, view sets, visibility, difficulty, episodes) consumes the
+//! plain types defined here: [`Mesh`], [`Pose`] and point clouds as `Vec<[f64; 3]>`.
+
+pub mod error;
+pub mod mesh;
+pub mod pose;
+
+pub use error::GeomError;
+pub use mesh::{Appearance, Mesh};
+pub use pose::Pose;
+
+/// Crate version, recorded in every output file.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");

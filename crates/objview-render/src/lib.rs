@@ -1,0 +1,15 @@
+//! Camera model (SPEC §2) and the exact first-hit renderer of objview.
+//!
+//! - [`camera`]: intrinsics, the pose → camera-axes rule (pole rule, roll), projection and
+//!   pixel-centre rays.
+//! - [`reference`]: brute-force per-pixel ray–triangle casting. Slow, obviously correct; the
+//!   oracle the fast renderer is tested against.
+//! - [`frame`]: a rendered view (depth, triangle ids) and what is derived from it
+//!   (observed point cloud, RGB).
+
+pub mod camera;
+pub mod frame;
+pub mod reference;
+
+pub use camera::{Camera, Intrinsics};
+pub use frame::{Frame, NO_HIT};

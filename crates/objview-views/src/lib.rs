@@ -1,0 +1,1 @@
+//! View sets and view spaces.

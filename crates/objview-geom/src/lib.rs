@@ -15,3 +15,10 @@ pub use pose::Pose;
 
 /// Crate version, recorded in every output file.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+
+pub mod cloud;
+pub mod io;
+pub mod normalize;
+pub mod npy;
+pub mod synth;
+pub mod write;

@@ -13,3 +13,14 @@ pub mod reference;
 
 pub use camera::{Camera, Intrinsics};
 pub use frame::{Frame, NO_HIT};
+
+pub mod preview;
+pub mod raster;
+pub mod rgb;
+
+/// Renders `mesh` from `camera`: first hit through every pixel centre (SPEC §2).
+/// Poses are in the object frame (see [`camera`]); depth is camera-frame z, 0 = no hit.
+pub fn render(mesh: &objview_geom::Mesh, camera: &Camera) -> Frame {
+    // Placeholder route until the rasterizer lands: the exact brute-force reference.
+    reference::render(mesh, camera)
+}

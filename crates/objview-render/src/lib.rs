@@ -18,9 +18,11 @@ pub mod preview;
 pub mod raster;
 pub mod rgb;
 
+pub mod bench;
+pub use raster::{render_parallel, Renderer};
+
 /// Renders `mesh` from `camera`: first hit through every pixel centre (SPEC §2).
 /// Poses are in the object frame (see [`camera`]); depth is camera-frame z, 0 = no hit.
 pub fn render(mesh: &objview_geom::Mesh, camera: &Camera) -> Frame {
-    // Placeholder route until the rasterizer lands: the exact brute-force reference.
-    reference::render(mesh, camera)
+    raster::render(mesh, camera)
 }

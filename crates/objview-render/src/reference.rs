@@ -3,7 +3,7 @@
 //! camera-frame depth lies in [znear, zfar]. O(pixels × triangles): for tests on small meshes,
 //! never for production.
 
-use crate::{Camera, Frame, NO_HIT};
+use crate::{Camera, Frame};
 use objview_geom::Mesh;
 use rayon::prelude::*;
 
@@ -70,7 +70,7 @@ pub fn render(mesh: &Mesh, cam: &Camera) -> Frame {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Intrinsics;
+    use crate::{Intrinsics, NO_HIT};
     use objview_geom::Pose;
 
     #[test]

@@ -1,0 +1,105 @@
+//! Per-view timing of O(v) in both visibility modes, one thread, for `objview bench render`
+//! and `examples/bench_visibility.rs`. Reports medians (robust to a busy machine).
+
+use crate::set::VoxelSet;
+use crate::visibility::{observed_voxels_mesh, InverseCaster};
+use crate::VoxelError;
+use objview_geom::{Mesh, Pose};
+use objview_render::{Camera, Intrinsics};
+use std::time::Instant;
+
+/// Timings of [`bench_visibility`]; times in milliseconds per view.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VisibilityBench {
+    /// |S_gt|.
+    pub voxels: usize,
+    /// Time to build S_gt from the cloud (ms).
+    pub set_build_ms: f64,
+    /// Time to build the `inverse` engine (distance field) once per object (ms).
+    pub caster_build_ms: f64,
+    /// Median `inverse` O(v) time per view (ms), over all poses and repeats.
+    pub inverse_median_ms: f64,
+    /// Minimum `inverse` time per view (ms).
+    pub inverse_min_ms: f64,
+    /// Mean |O(v)| in `inverse` mode.
+    pub inverse_mean_observed: f64,
+    /// Median `mesh` O(v) time per view (ms, render included), `None` when not run.
+    pub mesh_median_ms: Option<f64>,
+    /// Mean |O(v)| in `mesh` mode.
+    pub mesh_mean_observed: Option<f64>,
+}
+
+/// Times O(v) per view on one thread: S_gt of `cloud` at resolution `r`, every pose of `poses`
+/// (object frame, SPEC §2 intrinsics), `repeats` passes for `inverse`; `mesh` mode renders
+/// `mesh` for each of the first `mesh_views` poses once (0 skips it).
+pub fn bench_visibility(
+    mesh: &Mesh,
+    cloud: &[[f64; 3]],
+    r: f64,
+    poses: &[Pose],
+    repeats: usize,
+    mesh_views: usize,
+) -> Result<VisibilityBench, VoxelError> {
+    let t = Instant::now();
+    let set = VoxelSet::from_points(cloud, r)?;
+    let set_build_ms = ms(t);
+    let t = Instant::now();
+    let caster = InverseCaster::new(&set);
+    let caster_build_ms = ms(t);
+    let cameras: Vec<Camera> = poses.iter().map(|p| Camera::new(*p, Intrinsics::default())).collect();
+    let mut times = Vec::new();
+    let mut observed = 0usize;
+    for rep in 0..repeats.max(1) {
+        for cam in &cameras {
+            let t = Instant::now();
+            let o = caster.observe(cam);
+            times.push(ms(t));
+            if rep == 0 {
+                observed += o.len();
+            }
+        }
+    }
+    let inverse_min_ms = times.iter().copied().fold(f64::INFINITY, f64::min);
+    let inverse_median_ms = median(&mut times);
+    let inverse_mean_observed = observed as f64 / cameras.len().max(1) as f64;
+    let (mut mesh_median_ms, mut mesh_mean_observed) = (None, None);
+    let nm = mesh_views.min(cameras.len());
+    if nm > 0 {
+        let mut times = Vec::new();
+        let mut observed = 0usize;
+        for cam in &cameras[..nm] {
+            let t = Instant::now();
+            observed += observed_voxels_mesh(&set, mesh, cam).len();
+            times.push(ms(t));
+        }
+        mesh_median_ms = Some(median(&mut times));
+        mesh_mean_observed = Some(observed as f64 / nm as f64);
+    }
+    Ok(VisibilityBench {
+        voxels: set.len(),
+        set_build_ms,
+        caster_build_ms,
+        inverse_median_ms,
+        inverse_min_ms,
+        inverse_mean_observed,
+        mesh_median_ms,
+        mesh_mean_observed,
+    })
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}

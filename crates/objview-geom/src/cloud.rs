@@ -44,29 +44,20 @@ pub fn cloud_count(area: f64) -> usize {
 /// probability proportional to its area, then a uniform point inside it), from a ChaCha8
 /// stream seeded with `seed`. Single-threaded and platform-independent: the same inputs give
 /// the same bits. Empty when `count` is 0 or the mesh has no area.
+///
+/// Triangles are drawn in O(1) with Walker's alias table (Vose's construction) over the
+/// triangles of positive area, so zero-area triangles are never chosen.
 pub fn sample_surface(mesh: &Mesh, count: usize, seed: u64) -> Vec<[f64; 3]> {
-    let n = mesh.triangles.len();
-    let mut cum = Vec::with_capacity(n);
-    let mut total = 0.0f64;
-    let mut last_positive = None;
-    for t in 0..n {
-        let a = mesh.triangle_area(t);
-        if a > 0.0 {
-            total += a;
-            last_positive = Some(t);
-        }
-        cum.push(total);
-    }
-    let Some(last_positive) = last_positive else { return Vec::new() };
-    if count == 0 || !total.is_finite() {
+    let areas: Vec<f64> = (0..mesh.triangles.len())
+        .map(|t| mesh.triangle_area(t))
+        .collect();
+    let Some(table) = AliasTable::new(&areas) else {
         return Vec::new();
-    }
+    };
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut out = Vec::with_capacity(count);
     for _ in 0..count {
-        let x = rng.gen::<f64>() * total;
-        // First triangle whose cumulative area exceeds x: zero-area triangles never are.
-        let t = cum.partition_point(|&c| c <= x).min(last_positive);
+        let t = table.sample(&mut rng);
         let mut u = rng.gen::<f64>();
         let mut v = rng.gen::<f64>();
         if u + v > 1.0 {
@@ -74,9 +65,74 @@ pub fn sample_surface(mesh: &Mesh, count: usize, seed: u64) -> Vec<[f64; 3]> {
             v = 1.0 - v;
         }
         let [a, b, c] = mesh.triangle(t);
-        out.push(std::array::from_fn(|k| a[k] + u * (b[k] - a[k]) + v * (c[k] - a[k])));
+        out.push(std::array::from_fn(|k| {
+            a[k] + u * (b[k] - a[k]) + v * (c[k] - a[k])
+        }));
     }
     out
+}
+
+/// One column of an alias table: keep `own` with probability `prob`, else take `alias`.
+#[derive(Clone, Copy)]
+struct AliasEntry {
+    prob: f64,
+    own: u32,
+    alias: u32,
+}
+
+/// Walker's alias table over the items of positive weight.
+struct AliasTable {
+    entries: Vec<AliasEntry>,
+}
+
+impl AliasTable {
+    /// `None` when no weight is positive and finite, or the total is not finite.
+    fn new(weights: &[f64]) -> Option<AliasTable> {
+        let ids: Vec<u32> = (0..weights.len() as u32)
+            .filter(|&i| weights[i as usize] > 0.0 && weights[i as usize].is_finite())
+            .collect();
+        let total: f64 = ids.iter().map(|&i| weights[i as usize]).sum();
+        if ids.is_empty() || !total.is_finite() {
+            return None;
+        }
+        let m = ids.len();
+        let mut scaled: Vec<f64> = ids
+            .iter()
+            .map(|&i| weights[i as usize] * m as f64 / total)
+            .collect();
+        let mut entries: Vec<AliasEntry> = ids
+            .iter()
+            .map(|&i| AliasEntry {
+                prob: 1.0,
+                own: i,
+                alias: i,
+            })
+            .collect();
+        let (mut small, mut large): (Vec<usize>, Vec<usize>) =
+            (0..m).partition(|&k| scaled[k] < 1.0);
+        while let (Some(&s), Some(&l)) = (small.last(), large.last()) {
+            small.pop();
+            entries[s].prob = scaled[s];
+            entries[s].alias = ids[l];
+            scaled[l] = (scaled[l] + scaled[s]) - 1.0;
+            if scaled[l] < 1.0 {
+                large.pop();
+                small.push(l);
+            }
+        }
+        // Leftovers (rounding) keep probability 1 of themselves; all have positive weight.
+        Some(AliasTable { entries })
+    }
+
+    #[inline]
+    fn sample(&self, rng: &mut ChaCha8Rng) -> usize {
+        let e = self.entries[rng.gen_range(0..self.entries.len())];
+        if rng.gen::<f64>() < e.prob {
+            e.own as usize
+        } else {
+            e.alias as usize
+        }
+    }
 }
 
 /// Reads a ground-truth cloud, choosing the format from the extension (case-insensitive):
@@ -84,7 +140,10 @@ pub fn sample_surface(mesh: &Mesh, count: usize, seed: u64) -> Vec<[f64; 3]> {
 /// columns are x y z), `.npz` (the array named `points`, `xyz` or `arr_0`, else the first).
 /// Empty clouds and non-finite coordinates are errors naming the file.
 pub fn read_cloud(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
-    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
     let pts = crate::io::catch_panic(path, || match ext.as_deref() {
         Some("pcd") => read_pcd(path),
         Some("ply") => Ok(crate::io::ply::read(path, false)?.positions),
@@ -93,13 +152,23 @@ pub fn read_cloud(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
             npy_points(path, &bytes, "")
         }
         Some("npz") => read_npz(path),
-        _ => Err(GeomError::Unsupported { path: path.to_path_buf(), expected: "pcd, ply, npy, npz" }),
+        _ => Err(GeomError::Unsupported {
+            path: path.to_path_buf(),
+            expected: "pcd, ply, npy, npz",
+        }),
     })?;
     if pts.is_empty() {
         return Err(GeomError::invalid(path, "point cloud has no points"));
     }
-    if let Some((i, p)) = pts.iter().enumerate().find(|(_, p)| !p.iter().all(|x| x.is_finite())) {
-        return Err(GeomError::invalid(path, format!("point {i} has a non-finite coordinate {p:?}")));
+    if let Some((i, p)) = pts
+        .iter()
+        .enumerate()
+        .find(|(_, p)| !p.iter().all(|x| x.is_finite()))
+    {
+        return Err(GeomError::invalid(
+            path,
+            format!("point {i} has a non-finite coordinate {p:?}"),
+        ));
     }
     Ok(pts)
 }
@@ -107,16 +176,23 @@ pub fn read_cloud(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
 /// Points from NPY bytes; `entry` names the NPZ member in errors ("" for a plain .npy).
 fn npy_points(path: &Path, bytes: &[u8], entry: &str) -> Result<Vec<[f64; 3]>, GeomError> {
     let (shape, v) = parse_npy_f64(path, bytes).map_err(|e| match e {
-        GeomError::Parse { path, reason } if !entry.is_empty() => {
-            GeomError::Parse { path, reason: format!("entry '{entry}': {reason}") }
-        }
+        GeomError::Parse { path, reason } if !entry.is_empty() => GeomError::Parse {
+            path,
+            reason: format!("entry '{entry}': {reason}"),
+        },
         e => e,
     })?;
     let [_, k] = shape[..] else {
-        return Err(GeomError::invalid(path, format!("{entry} array of shape {shape:?} is not (n, 3)")));
+        return Err(GeomError::invalid(
+            path,
+            format!("{entry} array of shape {shape:?} is not (n, 3)"),
+        ));
     };
     if k < 3 {
-        return Err(GeomError::invalid(path, format!("{entry} array of shape {shape:?} is not (n, 3)")));
+        return Err(GeomError::invalid(
+            path,
+            format!("{entry} array of shape {shape:?} is not (n, 3)"),
+        ));
     }
     Ok(v.chunks_exact(k).map(|c| [c[0], c[1], c[2]]).collect())
 }
@@ -172,12 +248,16 @@ pub fn lzf_decompress(input: &[u8], out_len: usize) -> Result<Vec<u8>, String> {
             ip += len;
         } else {
             let mut len = ctrl >> 5;
-            let Some(&b) = input.get(ip) else { return Err("LZF back-reference truncated".into()) };
+            let Some(&b) = input.get(ip) else {
+                return Err("LZF back-reference truncated".into());
+            };
             if len == 7 {
                 len += b as usize;
                 ip += 1;
             }
-            let Some(&lo) = input.get(ip) else { return Err("LZF back-reference truncated".into()) };
+            let Some(&lo) = input.get(ip) else {
+                return Err("LZF back-reference truncated".into());
+            };
             ip += 1;
             let dist = ((ctrl & 0x1f) << 8) + lo as usize + 1;
             len += 2;
@@ -194,7 +274,10 @@ pub fn lzf_decompress(input: &[u8], out_len: usize) -> Result<Vec<u8>, String> {
         }
     }
     if out.len() != out_len {
-        return Err(format!("LZF produced {} bytes, header declares {out_len}", out.len()));
+        return Err(format!(
+            "LZF produced {} bytes, header declares {out_len}",
+            out.len()
+        ));
     }
     Ok(out)
 }
@@ -209,24 +292,42 @@ fn read_pcd(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
     let mut pos = 0;
     let mut data_kind = None;
     while pos < bytes.len() {
-        let end = bytes[pos..].iter().position(|&b| b == b'\n').map_or(bytes.len(), |e| pos + e);
-        let line = std::str::from_utf8(&bytes[pos..end]).map_err(|_| bad("header is not text".into()))?;
+        let end = bytes[pos..]
+            .iter()
+            .position(|&b| b == b'\n')
+            .map_or(bytes.len(), |e| pos + e);
+        let line =
+            std::str::from_utf8(&bytes[pos..end]).map_err(|_| bad("header is not text".into()))?;
         pos = (end + 1).min(bytes.len());
         let line = line.split('#').next().unwrap_or("").trim();
         let mut t = line.split_whitespace();
         let Some(key) = t.next() else { continue };
         let vals: Vec<&str> = t.collect();
-        let num = |s: &str| s.parse::<usize>().map_err(|_| bad(format!("bad number '{s}' in {key}")));
+        let num = |s: &str| {
+            s.parse::<usize>()
+                .map_err(|_| bad(format!("bad number '{s}' in {key}")))
+        };
         match key.to_ascii_uppercase().as_str() {
             "VERSION" | "VIEWPOINT" => {}
             "FIELDS" => {
                 fields = vals
                     .iter()
-                    .map(|n| PcdField { name: n.to_string(), size: 4, ty: 'F', count: 1 })
+                    .map(|n| PcdField {
+                        name: n.to_string(),
+                        size: 4,
+                        ty: 'F',
+                        count: 1,
+                    })
                     .collect()
             }
             "SIZE" => sizes = Some(vals.iter().map(|s| num(s)).collect::<Result<Vec<_>, _>>()?),
-            "TYPE" => types = Some(vals.iter().map(|s| s.chars().next().unwrap_or('?')).collect::<Vec<_>>()),
+            "TYPE" => {
+                types = Some(
+                    vals.iter()
+                        .map(|s| s.chars().next().unwrap_or('?'))
+                        .collect::<Vec<_>>(),
+                )
+            }
             "COUNT" => counts = Some(vals.iter().map(|s| num(s)).collect::<Result<Vec<_>, _>>()?),
             "WIDTH" => width = Some(num(vals.first().copied().unwrap_or(""))?),
             "HEIGHT" => height = num(vals.first().copied().unwrap_or(""))?,
@@ -238,12 +339,18 @@ fn read_pcd(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
             other => return Err(bad(format!("unknown header line '{other}' (wrong magic?)"))),
         }
     }
-    let Some(kind) = data_kind else { return Err(bad("no DATA line".into())) };
+    let Some(kind) = data_kind else {
+        return Err(bad("no DATA line".into()));
+    };
     if fields.is_empty() {
         return Err(bad("no FIELDS line".into()));
     }
     let nf = fields.len();
-    for (what, len) in [("SIZE", sizes.as_ref().map(Vec::len)), ("TYPE", types.as_ref().map(Vec::len)), ("COUNT", counts.as_ref().map(Vec::len))] {
+    for (what, len) in [
+        ("SIZE", sizes.as_ref().map(Vec::len)),
+        ("TYPE", types.as_ref().map(Vec::len)),
+        ("COUNT", counts.as_ref().map(Vec::len)),
+    ] {
         if let Some(l) = len {
             if l != nf {
                 return Err(bad(format!("{what} has {l} entries for {nf} fields")));
@@ -261,7 +368,10 @@ fn read_pcd(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
             f.count = c[i];
         }
         if !matches!(f.size, 1 | 2 | 4 | 8) || f.count > 1 << 20 {
-            return Err(bad(format!("field '{}' has SIZE {} COUNT {}", f.name, f.size, f.count)));
+            return Err(bad(format!(
+                "field '{}' has SIZE {} COUNT {}",
+                f.name, f.size, f.count
+            )));
         }
     }
     let n = match (points, width) {
@@ -294,7 +404,8 @@ fn read_pcd(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
     };
     match kind.as_str() {
         "ascii" => {
-            let text = std::str::from_utf8(data).map_err(|_| bad("ascii data is not text".into()))?;
+            let text =
+                std::str::from_utf8(data).map_err(|_| bad("ascii data is not text".into()))?;
             let per_point: usize = fields.iter().map(|f| f.count).sum();
             let mut out = Vec::with_capacity(n.min(data.len() / 6));
             for line in text.lines() {
@@ -306,17 +417,26 @@ fn read_pcd(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
                     continue;
                 }
                 if toks.len() < per_point {
-                    return Err(bad(format!("point {} has {} values, expected {per_point}", out.len(), toks.len())));
+                    return Err(bad(format!(
+                        "point {} has {} values, expected {per_point}",
+                        out.len(),
+                        toks.len()
+                    )));
                 }
                 let mut p = [0.0; 3];
                 for k in 0..3 {
                     let s = toks[xyz[k].1];
-                    p[k] = s.parse().map_err(|_| bad(format!("bad number '{s}' in point {}", out.len())))?;
+                    p[k] = s
+                        .parse()
+                        .map_err(|_| bad(format!("bad number '{s}' in point {}", out.len())))?;
                 }
                 out.push(p);
             }
             if out.len() < n {
-                return Err(bad(format!("header declares {n} points, data has {} (truncated)", out.len())));
+                return Err(bad(format!(
+                    "header declares {n} points, data has {} (truncated)",
+                    out.len()
+                )));
             }
             Ok(out)
         }
@@ -336,19 +456,26 @@ fn read_pcd(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
         }
         "binary_compressed" => {
             if data.len() < 8 {
-                return Err(bad("binary_compressed data shorter than its 8-byte size header".into()));
+                return Err(bad(
+                    "binary_compressed data shorter than its 8-byte size header".into(),
+                ));
             }
             let csize = u32::from_le_bytes([data[0], data[1], data[2], data[3]]) as usize;
             let usize_ = u32::from_le_bytes([data[4], data[5], data[6], data[7]]) as usize;
             let Some(comp) = data.get(8..8 + csize) else {
-                return Err(bad(format!("compressed block of {csize} bytes is truncated")));
+                return Err(bad(format!(
+                    "compressed block of {csize} bytes is truncated"
+                )));
             };
             if usize_ != n.saturating_mul(record) {
-                return Err(bad(format!("uncompressed size {usize_} != {n} points × {record} bytes")));
+                return Err(bad(format!(
+                    "uncompressed size {usize_} != {n} points × {record} bytes"
+                )));
             }
             let raw = lzf_decompress(comp, usize_).map_err(bad)?;
             // Field-major layout: all values of field 0, then of field 1, ...
-            let field_start = |i: usize| -> usize { fields[..i].iter().map(|f| n * f.size * f.count).sum() };
+            let field_start =
+                |i: usize| -> usize { fields[..i].iter().map(|f| n * f.size * f.count).sum() };
             let starts = xyz.map(|(i, _, _)| field_start(i));
             Ok((0..n)
                 .map(|p| {
@@ -400,4 +527,299 @@ fn push_f32_xyz(buf: &mut Vec<u8>, pts: &[[f64; 3]]) {
 fn write_all(path: &Path, bytes: &[u8]) -> Result<(), GeomError> {
     let mut f = std::fs::File::create(path).map_err(|e| GeomError::io(path, e))?;
     f.write_all(bytes).map_err(|e| GeomError::io(path, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::PathBuf;
+
+    fn write(dir: &tempfile::TempDir, name: &str, bytes: &[u8]) -> PathBuf {
+        let p = dir.path().join(name);
+        std::fs::write(&p, bytes).unwrap();
+        p
+    }
+
+    fn pts() -> Vec<[f64; 3]> {
+        (0..50)
+            .map(|i| [i as f64 * 0.25, -(i as f64) / 8.0, 0.5 + i as f64])
+            .collect()
+    }
+
+    #[test]
+    fn count_rule() {
+        // 0.004² = 1.6e-5: area 1 -> 62 500 points.
+        assert_eq!(cloud_count(1.0), 62_500);
+        assert_eq!(cloud_count(0.1), 20_000);
+        assert_eq!(cloud_count(0.32), 20_000); // exactly 20 000
+        assert_eq!(cloud_count(0.32001), 20_001); // 20 000.625
+        assert_eq!(cloud_count(31.9), 1_993_750);
+        assert_eq!(cloud_count(1e9), 2_000_000);
+        assert_eq!(cloud_count(0.0), 20_000);
+        assert_eq!(cloud_count(f64::NAN), 20_000);
+        assert_eq!(cloud_count(f64::INFINITY), 2_000_000);
+    }
+
+    #[test]
+    fn round_trip_every_format() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = pts();
+        let f32_exact: Vec<[f64; 3]> = p.iter().map(|q| q.map(|c| c as f32 as f64)).collect();
+        write_pcd_binary(&dir.path().join("a.pcd"), &p).unwrap();
+        assert_eq!(read_cloud(&dir.path().join("a.pcd")).unwrap(), f32_exact);
+        write_ply_points(&dir.path().join("a.PLY"), &p).unwrap();
+        assert_eq!(read_cloud(&dir.path().join("a.PLY")).unwrap(), f32_exact);
+        let flat: Vec<f64> = p.iter().flatten().copied().collect();
+        crate::npy::write_npy_f64(&dir.path().join("a.npy"), &[p.len(), 3], &flat).unwrap();
+        assert_eq!(read_cloud(&dir.path().join("a.npy")).unwrap(), p);
+        // NPZ, stored and deflated, with the cloud not the first member.
+        let npy = std::fs::read(dir.path().join("a.npy")).unwrap();
+        for method in [
+            zip::CompressionMethod::Stored,
+            zip::CompressionMethod::Deflated,
+        ] {
+            let path = dir.path().join("a.npz");
+            let mut z = zip::ZipWriter::new(std::fs::File::create(&path).unwrap());
+            let opt = zip::write::SimpleFileOptions::default().compression_method(method);
+            z.start_file("normals.npy", opt).unwrap();
+            let mut other = crate::npy::npy_header("<f8", &[1, 3]);
+            other.extend([0u8; 24]);
+            z.write_all(&other).unwrap();
+            z.start_file("points.npy", opt).unwrap();
+            z.write_all(&npy).unwrap();
+            z.finish().unwrap();
+            assert_eq!(read_cloud(&path).unwrap(), p);
+        }
+    }
+
+    #[test]
+    fn pcd_ascii_and_binary_with_extra_fields() {
+        let dir = tempfile::tempdir().unwrap();
+        let ascii =
+            "# .PCD v0.7\nVERSION 0.7\nFIELDS rgb x y z normal_x normal_y normal_z curvature\n\
+            SIZE 4 4 4 4 4 4 4 4\nTYPE F F F F F F F F\nCOUNT 1 1 1 1 1 1 1 1\nWIDTH 2\nHEIGHT 1\n\
+            VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n4.2e6 1 2 3 0 0 1 0.5\n\
+            4.2e6 -1.5 0.25 7 0 1 0 0\n";
+        let got = read_cloud(&write(&dir, "a.pcd", ascii.as_bytes())).unwrap();
+        assert_eq!(got, vec![[1.0, 2.0, 3.0], [-1.5, 0.25, 7.0]]);
+        // Binary: intensity u8, x y z double, a 3-count float descriptor, label u32.
+        let mut b = b"VERSION .7\nFIELDS intensity x y z desc label\nSIZE 1 8 8 8 4 4\n\
+            TYPE U F F F F U\nCOUNT 1 1 1 1 3 1\nWIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA binary\n"
+            .to_vec();
+        for (i, p) in [[0.1f64, 0.2, 0.3], [4.0, -5.0, 6.5]].iter().enumerate() {
+            b.push(i as u8);
+            for c in p {
+                b.extend(c.to_le_bytes());
+            }
+            b.extend(f32s(&[9.0, 9.0, 9.0]));
+            b.extend(7u32.to_le_bytes());
+        }
+        let got = read_cloud(&write(&dir, "b.pcd", &b)).unwrap();
+        assert_eq!(got, vec![[0.1, 0.2, 0.3], [4.0, -5.0, 6.5]]);
+        // Truncated binary.
+        let e = read_cloud(&write(&dir, "c.pcd", &b[..b.len() - 1]))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("c.pcd") && e.contains("truncated"), "{e}");
+    }
+
+    fn f32s(v: &[f32]) -> Vec<u8> {
+        v.iter().flat_map(|x| x.to_le_bytes()).collect()
+    }
+
+    #[test]
+    fn lzf_and_binary_compressed_pcd() {
+        // Literal "abc" (ctrl 2), then a back-reference of 6 bytes at distance 3:
+        // len - 2 = 4 -> ctrl = 4 << 5 = 0x80, offset byte = distance - 1 = 2.
+        assert_eq!(
+            lzf_decompress(&[2, b'a', b'b', b'c', 0x80, 2], 9).unwrap(),
+            b"abcabcabc"
+        );
+        // Long back-reference: len field 7 + extra byte 3 -> 12 bytes of 'z'.
+        assert_eq!(
+            lzf_decompress(&[0, b'z', 0xE0, 3, 0], 13).unwrap(),
+            vec![b'z'; 13]
+        );
+        assert!(lzf_decompress(&[0x80, 5], 10)
+            .unwrap_err()
+            .contains("before the start"));
+        assert!(lzf_decompress(&[5, 1, 2], 6)
+            .unwrap_err()
+            .contains("past the end"));
+        // PCD binary_compressed: fields x y z (f32), field-major, LZF with literal runs only.
+        let p = [[1.0f32, 2.0, 3.0], [4.0, 5.0, 6.0]];
+        let mut raw = Vec::new();
+        for k in 0..3 {
+            for q in &p {
+                raw.extend(q[k].to_le_bytes());
+            }
+        }
+        let mut comp = Vec::new();
+        for chunk in raw.chunks(32) {
+            comp.push((chunk.len() - 1) as u8);
+            comp.extend(chunk);
+        }
+        let mut b = b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 1\n\
+            POINTS 2\nDATA binary_compressed\n"
+            .to_vec();
+        b.extend((comp.len() as u32).to_le_bytes());
+        b.extend((raw.len() as u32).to_le_bytes());
+        b.extend(&comp);
+        let dir = tempfile::tempdir().unwrap();
+        let got = read_cloud(&write(&dir, "z.pcd", &b)).unwrap();
+        assert_eq!(got, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+    }
+
+    #[test]
+    fn bad_clouds_are_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let check = |name: &str, bytes: &[u8], want: &str| {
+            let e = read_cloud(&write(&dir, name, bytes))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(name) && e.contains(want), "{e}");
+        };
+        let hdr = "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 1\nPOINTS 1\nDATA ascii\n";
+        check("n.pcd", format!("{hdr}0 nan 1\n").as_bytes(), "non-finite");
+        check("e.pcd", hdr.replace("1", "0").as_bytes(), "no points");
+        check("g.pcd", b"\x89PNG garbage", "invalid PCD");
+        check(
+            "i.pcd",
+            hdr.replace("F F F", "I I I").as_bytes(),
+            "must be TYPE F",
+        );
+        let empty = crate::npy::npy_header("<f8", &[0, 3]);
+        check("e.npy", &empty, "no points");
+        let mut flat = crate::npy::npy_header("<f8", &[3]);
+        flat.extend([0u8; 24]);
+        check("s.npy", &flat, "not (n, 3)");
+        check("g.npz", b"not a zip", "invalid NPZ");
+        check("x.xyz", b"", "unsupported");
+        let mut nan = Vec::new();
+        write_ply_points(&dir.path().join("t.ply"), &[[0.0, f64::NAN, 0.0]]).unwrap();
+        nan.extend(std::fs::read(dir.path().join("t.ply")).unwrap());
+        check("nan.ply", &nan, "non-finite");
+    }
+
+    /// Axis-aligned box [0,a]×[0,b]×[0,c] as 12 triangles.
+    fn cuboid(a: f64, b: f64, c: f64) -> Mesh {
+        let positions = (0..8)
+            .map(|i| {
+                [
+                    if i & 1 == 0 { 0.0 } else { a },
+                    if i & 2 == 0 { 0.0 } else { b },
+                    if i & 4 == 0 { 0.0 } else { c },
+                ]
+            })
+            .collect();
+        let quads = [
+            [0, 1, 3, 2],
+            [4, 6, 7, 5],
+            [0, 4, 5, 1],
+            [2, 3, 7, 6],
+            [0, 2, 6, 4],
+            [1, 5, 7, 3],
+        ];
+        Mesh::new(
+            positions,
+            quads
+                .iter()
+                .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+                .collect(),
+        )
+    }
+
+    #[test]
+    fn samples_lie_inside_a_triangle_uniformly() {
+        let (a, b, c) = ([0.3, -0.2, 0.1], [1.1, 0.4, -0.5], [-0.2, 0.9, 0.7]);
+        // A zero-area triangle next to it must never be sampled.
+        let m = Mesh::new(
+            vec![a, b, c, [5.0; 3]],
+            vec![[3, 3, 3], [0, 1, 2], [3, 3, 3]],
+        );
+        let s = sample_surface(&m, 20_000, 7);
+        assert_eq!(s.len(), 20_000);
+        let sub = |p: [f64; 3], q: [f64; 3]| [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+        let dot = |p: [f64; 3], q: [f64; 3]| p[0] * q[0] + p[1] * q[1] + p[2] * q[2];
+        let (e1, e2) = (sub(b, a), sub(c, a));
+        let n = [
+            e1[1] * e2[2] - e1[2] * e2[1],
+            e1[2] * e2[0] - e1[0] * e2[2],
+            e1[0] * e2[1] - e1[1] * e2[0],
+        ];
+        let nn = dot(n, n).sqrt();
+        let (d11, d12, d22) = (dot(e1, e1), dot(e1, e2), dot(e2, e2));
+        let det = d11 * d22 - d12 * d12;
+        let mut mean = [0.0; 3];
+        for p in &s {
+            let w = sub(*p, a);
+            assert!(dot(w, n).abs() / nn < 1e-12, "off the plane");
+            let (w1, w2) = (dot(w, e1), dot(w, e2));
+            let u = (d22 * w1 - d12 * w2) / det;
+            let v = (d11 * w2 - d12 * w1) / det;
+            assert!(
+                u >= -1e-12 && v >= -1e-12 && u + v <= 1.0 + 1e-12,
+                "outside: {u} {v}"
+            );
+            for k in 0..3 {
+                mean[k] += p[k] / s.len() as f64;
+            }
+        }
+        // Uniform on the triangle: the mean is the centroid (std of a coordinate < 0.4,
+        // so 5 sigma of the mean of 20 000 samples < 0.015).
+        for k in 0..3 {
+            let centroid = (a[k] + b[k] + c[k]) / 3.0;
+            assert!(
+                (mean[k] - centroid).abs() < 0.015,
+                "axis {k}: {} vs {centroid}",
+                mean[k]
+            );
+        }
+    }
+
+    #[test]
+    fn samples_per_face_proportional_to_area() {
+        // Faces: two of 1×2 (z = 0, 3), two of 1×3 (y = 0, 2), two of 2×3 (x = 0, 1); total 22.
+        let m = cuboid(1.0, 2.0, 3.0);
+        let n = 110_000;
+        let s = sample_surface(&m, n, DEFAULT_CLOUD_SEED);
+        let mut counts = [0usize; 3]; // faces normal to x, y, z
+        for p in &s {
+            let on = |v: f64, hi: f64| v.abs() < 1e-12 || (v - hi).abs() < 1e-12;
+            let k = if on(p[0], 1.0) {
+                0
+            } else if on(p[1], 2.0) {
+                1
+            } else {
+                assert!(on(p[2], 3.0));
+                2
+            };
+            counts[k] += 1;
+        }
+        for (k, area) in [12.0, 6.0, 4.0].iter().enumerate() {
+            let pr = area / 22.0;
+            let expect = n as f64 * pr;
+            let sigma = (n as f64 * pr * (1.0 - pr)).sqrt();
+            assert!(
+                (counts[k] as f64 - expect).abs() < 5.0 * sigma,
+                "{counts:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn sampling_is_deterministic() {
+        let m = cuboid(1.0, 2.0, 3.0);
+        let a = sample_surface(&m, 5000, 42);
+        let b = std::thread::spawn(move || sample_surface(&cuboid(1.0, 2.0, 3.0), 5000, 42))
+            .join()
+            .unwrap();
+        let bits = |v: &[[f64; 3]]| v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&a), bits(&b));
+        assert_ne!(bits(&a), bits(&sample_surface(&m, 5000, 43)));
+        // A prefix of a longer run is the shorter run (one stream, consumed in order).
+        assert_eq!(bits(&sample_surface(&m, 6000, 42)[..5000]), bits(&a));
+        assert!(sample_surface(&m, 0, 1).is_empty());
+        assert!(sample_surface(&Mesh::new(vec![[0.0; 3]; 3], vec![[0, 1, 2]]), 10, 1).is_empty());
+    }
 }

@@ -36,7 +36,7 @@
 //! projected vertices (or, for triangles crossing the near plane, from the f64 triangle
 //! clipped to z ≥ znear) with a small safety margin.
 
-use crate::{Camera, Frame, Intrinsics, NO_HIT};
+use crate::{Camera, Frame, NO_HIT};
 use objview_geom::Mesh;
 use rayon::prelude::*;
 
@@ -47,70 +47,67 @@ const EMPTY: u64 = u64::MAX;
 /// of the projected vertices and of the coverage test.
 const BBOX_MARGIN: f32 = 1e-3;
 
-/// Triangles whose smallest cos θ (between the triangle normal and a ray to one of its
-/// points) is below this get their per-pixel depth in f64.
-pub const GRAZING_COS: f64 = 0.05;
+/// Triangles whose f32 depth could be off by more than ~3ε·GRAZING_GAIN ≈ 4e-6 relative
+/// (seen at a grazing angle) get their per-pixel depth in f64.
+const GRAZING_GAIN: f32 = 20.0;
 
-/// A packed z-buffer entry: nearest depth first, then lowest triangle id.
+/// Pixels whose coverage is evaluated together.
+const LANES: usize = 8;
+
+/// Pixel blocks of the parallel merge/resolve passes.
+const BLOCK: usize = 16384;
+
+/// A packed z-buffer entry from the inverse depth w = 1/z (positive, finite, nonzero) and
+/// the triangle id: nearest depth (largest w) first, then lowest triangle id. Positive f32
+/// bit patterns order like the values, so `u32::MAX − bits(w)` orders like z.
 #[inline(always)]
-fn pack(z: f32, t: u32) -> u64 {
-    ((z.to_bits() as u64) << 32) | t as u64
+fn pack(w: f32, t: u32) -> u64 {
+    (((u32::MAX - w.to_bits()) as u64) << 32) | t as u64
 }
+
+/// Depth of a packed z-buffer entry, 0 for [`EMPTY`].
+#[inline(always)]
+fn unpack_depth(key: u64) -> f32 {
+    let w = f32::from_bits(u32::MAX - (key >> 32) as u32);
+    if key == EMPTY {
+        0.0
+    } else {
+        1.0 / w
+    }
+}
+
+/// A vertex in the camera frame: `[x, y, z, u, v, 0, 0, 0]` (f32), with the projected image
+/// coordinates (u, v) valid where z > znear / 2. 32 bytes: one aligned load per corner.
+type Vert = [f32; 8];
 
 /// Per-camera, per-mesh data shared read-only by all threads of one render.
 struct Setup<'a> {
     tris: &'a [[u32; 3]],
-    /// Camera-frame vertices (f64).
-    cam: &'a [[f64; 3]],
-    /// Projected vertices `(u, v, z)` in f32 (u, v only meaningful where z > znear / 2).
-    scr: &'a [[f32; 4]],
+    positions: &'a [[f64; 3]],
+    camera: &'a Camera,
+    verts: &'a [Vert],
+    /// Pixel-centre ray coordinates: px[u] = (u + ½ − cx) / fx, py[v] = (v + ½ − cy) / fy.
     px: &'a [f32],
     py: &'a [f32],
     px64: &'a [f64],
     py64: &'a [f64],
-    intr: Intrinsics,
+    /// Largest |px|, |py| over the image.
+    pxmax: f32,
+    pymax: f32,
 }
 
-/// Triangle constants, normalized so that "inside and in front" is "all edges ≥ 0, z > 0".
-struct TriConst {
-    /// Edge functions: e_k(u, v) = a[k]·px[u] + (b[k]·py[v] + c[k]).
-    a: [f32; 3],
-    b: [f32; 3],
-    c: [f32; 3],
-    /// Plane: depth = d / (n·r).
-    n: [f32; 3],
-    d: f32,
-    n64: [f64; 3],
-    d64: f64,
-    /// cos θ < [`GRAZING_COS`] somewhere on the triangle: evaluate depth in f64.
-    grazing: bool,
-}
-
-#[inline(always)]
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-#[inline(always)]
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-#[inline(always)]
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-/// Reusable buffers of the rasterizer. Create once, render many views.
+/// Reusable buffers of the rasterizer. Create once, render many views (and meshes).
 #[derive(Default)]
 pub struct Renderer {
-    cam: Vec<[f64; 3]>,
-    scr: Vec<[f32; 4]>,
-    /// One packed z-buffer per thread (the first one is the single-thread buffer).
+    verts: Vec<Vert>,
+    /// One packed z-buffer per thread (the first is the single-thread buffer). Invariant:
+    /// every buffer is all [`EMPTY`] between renders (resolving and merging reset them).
     zbufs: Vec<Vec<u64>>,
     px: Vec<f32>,
     py: Vec<f32>,
     px64: Vec<f64>,
     py64: Vec<f64>,
-    tables_for: Option<Intrinsics>,
+    tables_for: Option<crate::Intrinsics>,
 }
 
 impl Renderer {
@@ -119,22 +116,13 @@ impl Renderer {
         Renderer::default()
     }
 
-    /// Renders `mesh` (object frame) from `camera` (pose in the object frame, camera frame
+    /// Renders `mesh` (object frame) from `camera` (pose in the object frame; camera frame
     /// OpenCV x right / y down / z forward) into `frame` on the calling thread: first hit
-    /// through every pixel centre, depth = camera-frame z in [znear, zfar] (0 = miss),
-    /// triangle id or [`NO_HIT`]. `frame`'s buffers are resized and overwritten.
+    /// through every pixel centre, depth = camera-frame z in [znear, zfar] (0 = miss) and the
+    /// triangle id (or [`NO_HIT`]). `frame`'s buffers are resized and overwritten and its
+    /// camera set to `camera`.
     pub fn render_into(&mut self, mesh: &Mesh, camera: &Camera, frame: &mut Frame) {
-        self.prepare(mesh, camera, false);
-        let n = camera.intrinsics.num_pixels();
-        if self.zbufs.is_empty() {
-            self.zbufs.push(Vec::new());
-        }
-        let mut zbuf = std::mem::take(&mut self.zbufs[0]);
-        zbuf.clear();
-        zbuf.resize(n, EMPTY);
-        raster_range(&self.setup(mesh, camera), 0, mesh.triangles.len(), &mut zbuf);
-        resolve(&zbuf, camera, frame, false);
-        self.zbufs[0] = zbuf;
+        self.render_parts(mesh, camera, frame, 1);
     }
 
     /// Like [`Renderer::render_into`], using all threads of the current rayon pool: the
@@ -143,147 +131,137 @@ impl Renderer {
     /// [`Renderer::render_into`] for any number of threads.
     pub fn render_parallel_into(&mut self, mesh: &Mesh, camera: &Camera, frame: &mut Frame) {
         let threads = rayon::current_num_threads().max(1);
-        let ntri = mesh.triangles.len();
         // Below a few thousand triangles per thread the extra buffers cost more than they save.
-        let parts = threads.min(ntri / 2048).max(1);
-        if parts == 1 {
-            self.prepare(mesh, camera, true);
-            let n = camera.intrinsics.num_pixels();
-            if self.zbufs.is_empty() {
-                self.zbufs.push(Vec::new());
-            }
-            let mut zbuf = std::mem::take(&mut self.zbufs[0]);
-            zbuf.clear();
-            zbuf.resize(n, EMPTY);
-            raster_range(&self.setup(mesh, camera), 0, ntri, &mut zbuf);
-            resolve(&zbuf, camera, frame, true);
-            self.zbufs[0] = zbuf;
-            return;
-        }
-        self.prepare(mesh, camera, true);
+        let parts = threads.min(mesh.triangles.len() / 4096).max(1);
+        self.render_parts(mesh, camera, frame, parts);
+    }
+
+    fn render_parts(&mut self, mesh: &Mesh, camera: &Camera, frame: &mut Frame, parts: usize) {
+        let parallel = parts > 1;
+        self.prepare(mesh, camera, parallel);
         let n = camera.intrinsics.num_pixels();
         let mut bufs = std::mem::take(&mut self.zbufs);
-        bufs.resize_with(parts.max(bufs.len()), Vec::new);
+        if bufs.len() < parts {
+            bufs.resize_with(parts, Vec::new);
+        }
+        for b in &mut bufs[..parts] {
+            if b.len() != n {
+                b.clear();
+                b.resize(n, EMPTY);
+            }
+        }
+        let ntri = mesh.triangles.len();
         {
             let setup = self.setup(mesh, camera);
-            bufs[..parts].par_iter_mut().enumerate().for_each(|(k, buf)| {
-                buf.clear();
-                buf.resize(n, EMPTY);
-                let (lo, hi) = (ntri * k / parts, ntri * (k + 1) / parts);
-                raster_range(&setup, lo, hi, buf);
-            });
-        }
-        // Merge into buffer 0, in parallel over pixel blocks.
-        {
-            let (first, rest) = bufs.split_at_mut(1);
-            let rest = &rest[..parts - 1];
-            const BLOCK: usize = 16384;
-            first[0].par_chunks_mut(BLOCK).enumerate().for_each(|(k, out)| {
-                let (off, len) = (k * BLOCK, out.len());
-                for other in rest {
-                    for (o, &x) in out.iter_mut().zip(&other[off..off + len]) {
-                        *o = (*o).min(x);
+            if parallel {
+                bufs[..parts].par_iter_mut().enumerate().for_each(|(k, buf)| {
+                    raster_range(&setup, ntri * k / parts, ntri * (k + 1) / parts, buf);
+                });
+                // Merge into buffer 0 (resetting the others), in parallel over pixel blocks.
+                let (first, rest) = bufs.split_at_mut(1);
+                let mut rest: Vec<std::slice::ChunksMut<u64>> =
+                    rest[..parts - 1].iter_mut().map(|b| b.chunks_mut(BLOCK)).collect();
+                let blocks: Vec<(&mut [u64], Vec<&mut [u64]>)> = first[0]
+                    .chunks_mut(BLOCK)
+                    .map(|out| (out, rest.iter_mut().map(|it| it.next().expect("same size")).collect()))
+                    .collect();
+                blocks.into_par_iter().for_each(|(out, others)| {
+                    for other in others {
+                        for (o, x) in out.iter_mut().zip(other.iter_mut()) {
+                            *o = (*o).min(*x);
+                            *x = EMPTY;
+                        }
                     }
-                }
-            });
+                });
+            } else {
+                raster_range(&setup, 0, ntri, &mut bufs[0]);
+            }
         }
-        resolve(&bufs[0], camera, frame, true);
+        resolve(&mut bufs[0], camera, frame, parallel);
         self.zbufs = bufs;
     }
 
-    /// Transforms the vertices to the camera frame and builds the pixel-ray tables.
+    /// Transforms the vertices to the camera frame (f64, stored as f32) and projects them;
+    /// builds the pixel-ray tables when the intrinsics change.
     #[inline(never)]
     fn prepare(&mut self, mesh: &Mesh, camera: &Camera, parallel: bool) {
         let k = camera.intrinsics;
         if self.tables_for != Some(k) {
             self.px64 = (0..k.width).map(|u| (u as f64 + 0.5 - k.cx) / k.fx).collect();
             self.py64 = (0..k.height).map(|v| (v as f64 + 0.5 - k.cy) / k.fy).collect();
-            self.px = self.px64.iter().map(|&x| x as f32).collect();
+            // Padded with NaN (no coverage) so that a row can be read LANES pixels at a time.
+            self.px = self.px64.iter().map(|&x| x as f32).chain([f32::NAN; LANES]).collect();
             self.py = self.py64.iter().map(|&y| y as f32).collect();
             self.tables_for = Some(k);
         }
         let nv = mesh.positions.len();
-        self.cam.resize(nv, [0.0; 3]);
-        self.scr.resize(nv, [0.0; 4]);
+        self.verts.resize(nv, [0.0; 8]);
         let half_near = 0.5 * k.znear;
-        let xf = |p: &[f64; 3], c: &mut [f64; 3], s: &mut [f32; 4]| {
+        let xf = |p: &[f64; 3], out: &mut Vert| {
             let q = camera.to_camera(*p);
-            *c = q;
-            if q[2] > half_near {
+            let (u, v) = if q[2] > half_near {
                 let iz = 1.0 / q[2];
-                *s = [
-                    (k.cx + k.fx * q[0] * iz) as f32,
-                    (k.cy + k.fy * q[1] * iz) as f32,
-                    q[2] as f32,
-                    0.0,
-                ];
+                ((k.cx + k.fx * q[0] * iz) as f32, (k.cy + k.fy * q[1] * iz) as f32)
             } else {
-                *s = [0.0, 0.0, q[2] as f32, 0.0];
-            }
+                (0.0, 0.0)
+            };
+            *out = [q[0] as f32, q[1] as f32, q[2] as f32, u, v, 0.0, 0.0, 0.0];
         };
-        const CH: usize = 4096;
+        const CH: usize = 8192;
         if parallel && nv > 2 * CH {
-            mesh.positions
-                .par_chunks(CH)
-                .zip(self.cam.par_chunks_mut(CH))
-                .zip(self.scr.par_chunks_mut(CH))
-                .for_each(|((p, c), s)| {
-                    for ((p, c), s) in p.iter().zip(c).zip(s) {
-                        xf(p, c, s);
-                    }
-                });
+            mesh.positions.par_chunks(CH).zip(self.verts.par_chunks_mut(CH)).for_each(|(p, o)| {
+                p.iter().zip(o).for_each(|(p, o)| xf(p, o));
+            });
         } else {
-            for ((p, c), s) in mesh.positions.iter().zip(&mut self.cam).zip(&mut self.scr) {
-                xf(p, c, s);
-            }
+            mesh.positions.iter().zip(&mut self.verts).for_each(|(p, o)| xf(p, o));
         }
     }
 
-    fn setup<'a>(&'a self, mesh: &'a Mesh, camera: &Camera) -> Setup<'a> {
+    fn setup<'a>(&'a self, mesh: &'a Mesh, camera: &'a Camera) -> Setup<'a> {
         Setup {
             tris: &mesh.triangles,
-            cam: &self.cam,
-            scr: &self.scr,
+            positions: &mesh.positions,
+            camera,
+            verts: &self.verts,
             px: &self.px,
             py: &self.py,
             px64: &self.px64,
             py64: &self.py64,
-            intr: camera.intrinsics,
+            pxmax: self.px[..self.px64.len()].iter().fold(0.0, |m, x| m.max(x.abs())),
+            pymax: self.py.iter().fold(0.0, |m, x| m.max(x.abs())),
         }
     }
 }
 
-/// Unpacks a z-buffer into `frame` (depth 0 and [`NO_HIT`] where nothing was drawn).
+/// Unpacks a z-buffer into `frame` (depth 0 and [`NO_HIT`] where nothing was drawn) and
+/// resets the z-buffer to [`EMPTY`].
 #[inline(never)]
-fn resolve(zbuf: &[u64], camera: &Camera, frame: &mut Frame, parallel: bool) {
+fn resolve(zbuf: &mut [u64], camera: &Camera, frame: &mut Frame, parallel: bool) {
     let n = zbuf.len();
     frame.camera = *camera;
     frame.depth.resize(n, 0.0);
     frame.triangle.resize(n, NO_HIT);
-    let one = |(z, (d, t)): (&u64, (&mut f32, &mut u32))| {
-        if *z == EMPTY {
-            *d = 0.0;
-            *t = NO_HIT;
-        } else {
-            *d = f32::from_bits((*z >> 32) as u32);
-            *t = *z as u32;
+    let run = |z: &mut [u64], d: &mut [f32], t: &mut [u32]| {
+        for ((z, d), t) in z.iter_mut().zip(d).zip(t) {
+            let key = *z;
+            *z = EMPTY;
+            *d = unpack_depth(key);
+            *t = key as u32;
         }
     };
     if parallel {
-        const CH: usize = 16384;
-        zbuf.par_chunks(CH)
-            .zip(frame.depth.par_chunks_mut(CH).zip(frame.triangle.par_chunks_mut(CH)))
-            .for_each(|(z, (d, t))| z.iter().zip(d.iter_mut().zip(t.iter_mut())).for_each(one));
+        zbuf.par_chunks_mut(BLOCK)
+            .zip(frame.depth.par_chunks_mut(BLOCK).zip(frame.triangle.par_chunks_mut(BLOCK)))
+            .for_each(|(z, (d, t))| run(z, d, t));
     } else {
-        zbuf.iter().zip(frame.depth.iter_mut().zip(frame.triangle.iter_mut())).for_each(one);
+        run(zbuf, &mut frame.depth, &mut frame.triangle);
     }
 }
 
-/// Screen bounding box of the part of a triangle with z ≥ znear: clips the f64 camera-frame
-/// triangle against the near plane and projects the clipped polygon.
-/// Returns `(umin, umax, vmin, vmax)` in continuous pixel coordinates, or `None` if nothing
-/// of the triangle lies in front of the near plane.
-fn clipped_bbox(tri: [[f64; 3]; 3], k: &Intrinsics) -> Option<[f64; 4]> {
+/// Screen bounding box `[umin, umax, vmin, vmax]` (continuous pixel coordinates) of the part
+/// of a camera-frame triangle with z ≥ znear: clips the f64 triangle against the near plane
+/// and projects the clipped polygon. `None` if nothing lies in front of the near plane.
+fn clipped_bbox(tri: [[f64; 3]; 3], k: &crate::Intrinsics) -> Option<[f32; 4]> {
     let zn = k.znear;
     let mut bb = [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
     let mut any = false;
@@ -295,8 +273,7 @@ fn clipped_bbox(tri: [[f64; 3]; 3], k: &Intrinsics) -> Option<[f64; 4]> {
         any = true;
     };
     for i in 0..3 {
-        let p = tri[i];
-        let q = tri[(i + 1) % 3];
+        let (p, q) = (tri[i], tri[(i + 1) % 3]);
         if p[2] >= zn {
             add(p);
         }
@@ -305,118 +282,349 @@ fn clipped_bbox(tri: [[f64; 3]; 3], k: &Intrinsics) -> Option<[f64; 4]> {
             add([p[0] + s * (q[0] - p[0]), p[1] + s * (q[1] - p[1]), zn]);
         }
     }
-    any.then_some(bb)
+    any.then(|| bb.map(|x| x.clamp(-1e9, 1e9) as f32))
 }
 
-/// Draws triangles `lo..hi` into `zbuf` (keeping the packed minimum per pixel).
-#[inline(never)]
+#[inline(always)]
+fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+/// Edge function coefficients of the edge a → b: (a + b) × (b − a) = 2·(a × b), written so
+/// that it is well conditioned for short edges far from the camera and exactly antisymmetric
+/// in (a, b) (a + b is symmetric, b − a antisymmetric, both exactly), with no dependence on
+/// vertex indices — duplicated vertices at the same position give the same bits too.
+#[inline(always)]
+fn edge(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    cross([a[0] + b[0], a[1] + b[1], a[2] + b[2]], [b[0] - a[0], b[1] - a[1], b[2] - a[2]])
+}
+
+/// Triangles set up together (structure of arrays, vectorized arithmetic).
+const BATCH: usize = 8;
+
+/// What to do with a triangle of a batch.
+const SKIP: u8 = 0;
+/// Fully in front of znear / 2: bounding box from the projected corners, f32 depth.
+const DRAW: u8 = 1;
+/// As DRAW, but depth in f64 (grazing).
+const PRECISE: u8 = 2;
+/// Reaches behind znear / 2: bounding box from the near-clipped f64 triangle.
+const CLIPPED: u8 = 3;
+
+/// Set-up constants of a batch of triangles (lane j = triangle t0 + j).
+struct Batch {
+    flag: [u8; BATCH],
+    bbox: [[i32; BATCH]; 4],
+    /// Edge functions e_k(u, v) = a[k]·px[u] + (b[k]·py[v] + c[k]), sign-normalized.
+    a: [[f32; BATCH]; 3],
+    b: [[f32; BATCH]; 3],
+    c: [[f32; BATCH]; 3],
+    /// Sign-normalized plane n·p = d, d > 0.
+    n: [[f32; BATCH]; 3],
+    d: [f32; BATCH],
+    /// Whether the f32 depth is not accurate enough (grazing view).
+    grazing: [bool; BATCH],
+}
+
+/// Draws triangles `lo..hi` into `zbuf` (keeping the packed minimum per pixel), dispatching
+/// to a build for the running CPU's vector extensions when available. Both builds perform
+/// the same IEEE operations in the same order (Rust never fuses a·b + c on its own), so their
+/// output is identical.
 fn raster_range(s: &Setup, lo: usize, hi: usize, zbuf: &mut [u64]) {
-    let k = &s.intr;
-    let (w, h) = (k.width as i32, k.height as i32);
-    if w == 0 || h == 0 {
-        return;
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports the enabled features (checked just above).
+            unsafe { raster_range_avx2(s, lo, hi, zbuf) };
+            return;
+        }
     }
+    raster_range_impl::<false>(s, lo, hi, zbuf);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,sse4.1")]
+#[inline(never)]
+unsafe fn raster_range_avx2(s: &Setup, lo: usize, hi: usize, zbuf: &mut [u64]) {
+    raster_range_impl::<true>(s, lo, hi, zbuf);
+}
+
+/// Per-row constants of one triangle for the pixel kernels.
+#[derive(Clone, Copy)]
+struct RowConst {
+    /// Edge functions at px: a[k]·px + r[k].
+    a: [f32; 3],
+    r: [f32; 3],
+    /// Inverse depth at px: (n0·px + rw) · inv_d.
+    n0: f32,
+    rw: f32,
+    inv_d: f32,
+    /// Accepted inverse-depth range [1/zfar, 1/znear].
+    wmin: f32,
+    wmax: f32,
+}
+
+/// Coverage of the LANES pixels whose ray coordinates are `px`: bit j is set when all three
+/// edge functions are ≥ 0 and the inverse depth `w[j]` (written for every lane) lies in
+/// [wmin, wmax].
+#[inline(always)]
+fn cover_scalar(k: &RowConst, px: &[f32; LANES], w: &mut [f32; LANES]) -> u32 {
+    let mut mask = 0u32;
+    for (j, &x) in px.iter().enumerate() {
+        let e0 = k.a[0] * x + k.r[0];
+        let e1 = k.a[1] * x + k.r[1];
+        let e2 = k.a[2] * x + k.r[2];
+        let wj = (k.n0 * x + k.rw) * k.inv_d;
+        w[j] = wj;
+        let inside = (e0 >= 0.0) & (e1 >= 0.0) & (e2 >= 0.0) & (wj >= k.wmin) & (wj <= k.wmax);
+        mask |= (inside as u32) << j;
+    }
+    mask
+}
+
+/// [`cover_scalar`] with AVX: the same multiplications, additions and ordered comparisons,
+/// so the same bits.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn cover_avx2(k: &RowConst, px: &[f32; LANES], w: &mut [f32; LANES]) -> u32 {
+    use std::arch::x86_64::*;
+    let x = _mm256_loadu_ps(px.as_ptr());
+    let zero = _mm256_setzero_ps();
+    let lin = |a: f32, r: f32| _mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(a), x), _mm256_set1_ps(r));
+    let m0 = _mm256_cmp_ps::<_CMP_GE_OQ>(lin(k.a[0], k.r[0]), zero);
+    let m1 = _mm256_cmp_ps::<_CMP_GE_OQ>(lin(k.a[1], k.r[1]), zero);
+    let m2 = _mm256_cmp_ps::<_CMP_GE_OQ>(lin(k.a[2], k.r[2]), zero);
+    let wv = _mm256_mul_ps(lin(k.n0, k.rw), _mm256_set1_ps(k.inv_d));
+    _mm256_storeu_ps(w.as_mut_ptr(), wv);
+    let m3 = _mm256_cmp_ps::<_CMP_GE_OQ>(wv, _mm256_set1_ps(k.wmin));
+    let m4 = _mm256_cmp_ps::<_CMP_LE_OQ>(wv, _mm256_set1_ps(k.wmax));
+    let m = _mm256_and_ps(_mm256_and_ps(_mm256_and_ps(m0, m1), _mm256_and_ps(m2, m3)), m4);
+    _mm256_movemask_ps(m) as u32
+}
+
+/// Sets up triangles `t0 .. t0 + BATCH` (lanes past `hi` are skipped): depth-range
+/// rejection, bounding boxes, edge and plane constants, all branch-free so that it
+/// vectorizes.
+#[inline(always)]
+fn setup_batch(s: &Setup, t0: usize, hi: usize, out: &mut Batch) {
+    let k = &s.camera.intrinsics;
     let zn32 = k.znear as f32;
     let zf32 = k.zfar as f32;
     let half_near = (0.5 * k.znear) as f32;
-    for t in lo..hi {
-        let [i0, i1, i2] = s.tris[t];
-        let (s0, s1, s2) = (s.scr[i0 as usize], s.scr[i1 as usize], s.scr[i2 as usize]);
-        let zmin = s0[2].min(s1[2]).min(s2[2]);
-        let zmax = s0[2].max(s1[2]).max(s2[2]);
-        // f32 rounding is monotone, so these rejections are exact for the f64 depths.
-        if !(zmax >= zn32) || zmin > zf32 {
-            continue;
+    let (wf, hf) = (k.width as f32, k.height as f32);
+    // Corner coordinates, structure of arrays: p[corner][x, y, z, u, v][lane].
+    let mut p = [[[0.0f32; BATCH]; 5]; 3];
+    let last = hi - 1;
+    for j in 0..BATCH {
+        let tri = s.tris[(t0 + j).min(last)];
+        for (c, &i) in tri.iter().enumerate() {
+            let v = &s.verts[i as usize];
+            for q in 0..5 {
+                p[c][q][j] = v[q];
+            }
         }
-        let (umin, umax, vmin, vmax);
-        if zmin > half_near {
-            umin = s0[0].min(s1[0]).min(s2[0]);
-            umax = s0[0].max(s1[0]).max(s2[0]);
-            vmin = s0[1].min(s1[1]).min(s2[1]);
-            vmax = s0[1].max(s1[1]).max(s2[1]);
+    }
+    for j in 0..BATCH {
+        let (x0, y0, z0, u0, v0) = (p[0][0][j], p[0][1][j], p[0][2][j], p[0][3][j], p[0][4][j]);
+        let (x1, y1, z1, u1, v1) = (p[1][0][j], p[1][1][j], p[1][2][j], p[1][3][j], p[1][4][j]);
+        let (x2, y2, z2, u2, v2) = (p[2][0][j], p[2][1][j], p[2][2][j], p[2][3][j], p[2][4][j]);
+        let zmin = z0.min(z1).min(z2);
+        let zmax = z0.max(z1).max(z2);
+        // f32 rounding is monotone, so this rejection is exact for the f64 depths.
+        let in_range = (zmax >= zn32) & (zmin <= zf32) & (t0 + j <= last);
+        let in_front = zmin > half_near;
+        // Pixel u's centre is u + ½: candidates are ⌈umin − ½⌉ ..= ⌊umax − ½⌋.
+        let bx0 = (u0.min(u1).min(u2) - 0.5 - BBOX_MARGIN).clamp(-1.0, wf).ceil().max(0.0);
+        let bx1 = (u0.max(u1).max(u2) - 0.5 + BBOX_MARGIN).clamp(-1.0, wf).floor().min(wf - 1.0);
+        let by0 = (v0.min(v1).min(v2) - 0.5 - BBOX_MARGIN).clamp(-1.0, hf).ceil().max(0.0);
+        let by1 = (v0.max(v1).max(v2) - 0.5 + BBOX_MARGIN).clamp(-1.0, hf).floor().min(hf - 1.0);
+        let nonempty = (bx0 <= bx1) & (by0 <= by1);
+        out.bbox[0][j] = bx0 as i32;
+        out.bbox[1][j] = bx1 as i32;
+        out.bbox[2][j] = by0 as i32;
+        out.bbox[3][j] = by1 as i32;
+        // Plane n·p = d with d = [p0, p1, p2]; normalize the sign so that d > 0: then "hit in
+        // front" is "all edge functions ≥ 0" and depth = d / (n·r).
+        let (ax, ay, az) = (x1 - x0, y1 - y0, z1 - z0);
+        let (bx, by, bz) = (x2 - x0, y2 - y0, z2 - z0);
+        let n = [ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx];
+        let (t0x, t0y, t0z) = (n[0] * x0, n[1] * y0, n[2] * z0);
+        let d = t0x + t0y + t0z;
+        let sg = if d > 0.0 { 1.0f32 } else { -1.0 };
+        let e = [
+            edge([x0, y0, z0], [x1, y1, z1]),
+            edge([x1, y1, z1], [x2, y2, z2]),
+            edge([x2, y2, z2], [x0, y0, z0]),
+        ];
+        for q in 0..3 {
+            out.a[q][j] = sg * e[q][0];
+            out.b[q][j] = sg * e[q][1];
+            out.c[q][j] = sg * e[q][2];
+            out.n[q][j] = sg * n[q];
+        }
+        let d = sg * d;
+        out.d[j] = d;
+        // The f32 depth d / (n·r) is accurate to ~3ε·(sd / d + S / (n·r)) relative, with
+        // S = |n0·px| + |n1·py| + |n2| ≤ sr and n·r = d / z ≥ d / zmax on the triangle. Where
+        // that exceeds 3ε·GRAZING_GAIN (grazing views), the depth is computed in f64.
+        let sd = t0x.abs() + t0y.abs() + t0z.abs();
+        let sr = s.pxmax * n[0].abs() + s.pymax * n[1].abs() + n[2].abs();
+        out.grazing[j] = d * GRAZING_GAIN < sd + zmax * sr;
+        // d = 0: the plane passes through the camera centre; no ray meets it at z > 0.
+        let plane_ok = (d > 0.0) & (d < f32::INFINITY);
+        out.flag[j] = if !in_range {
+            SKIP
+        } else if !in_front {
+            CLIPPED
+        } else if !(nonempty & plane_ok) {
+            SKIP
         } else {
-            let tri = [s.cam[i0 as usize], s.cam[i1 as usize], s.cam[i2 as usize]];
-            let Some(bb) = clipped_bbox(tri, k) else { continue };
-            let clamp = |x: f64| x.clamp(-1e9, 1e9) as f32;
-            (umin, umax, vmin, vmax) = (clamp(bb[0]), clamp(bb[1]), clamp(bb[2]), clamp(bb[3]));
-        }
-        // Pixel u's centre is u + 0.5: the covered centres are ceil(umin − ½) ..= floor(umax − ½).
-        let x0 = ((umin - 0.5 - BBOX_MARGIN).ceil() as i32).max(0);
-        let x1 = ((umax - 0.5 + BBOX_MARGIN).floor() as i32).min(w - 1);
-        let y0 = ((vmin - 0.5 - BBOX_MARGIN).ceil() as i32).max(0);
-        let y1 = ((vmax - 0.5 + BBOX_MARGIN).floor() as i32).min(h - 1);
-        if x0 > x1 || y0 > y1 {
-            continue;
-        }
-        let Some(tc) = tri_const(s.cam[i0 as usize], s.cam[i1 as usize], s.cam[i2 as usize])
-        else {
-            continue;
+            DRAW
         };
-        let (x0, x1, y0, y1) = (x0 as usize, x1 as usize, y0 as usize, y1 as usize);
-        let id = t as u32;
-        let wu = w as usize;
-        if tc.grazing {
-            // Grazing triangle: depth in f64.
-            draw_precise(s, &tc, id, x0, x1, y0, y1, wu, zbuf);
-        } else {
+    }
+}
+
+#[inline(always)]
+fn raster_range_impl<const AVX: bool>(s: &Setup, lo: usize, hi: usize, zbuf: &mut [u64]) {
+    let k = &s.camera.intrinsics;
+    let (w, h) = (k.width as i32, k.height as i32);
+    if w == 0 || h == 0 || lo >= hi {
+        return;
+    }
+    // Depth range [znear, zfar] as inverse depth.
+    let wmin = (1.0 / k.zfar) as f32;
+    let wmax = (1.0 / k.znear) as f32;
+    let wu = w as usize;
+    let mut batch = Batch {
+        flag: [SKIP; BATCH],
+        bbox: [[0; BATCH]; 4],
+        a: [[0.0; BATCH]; 3],
+        b: [[0.0; BATCH]; 3],
+        c: [[0.0; BATCH]; 3],
+        n: [[0.0; BATCH]; 3],
+        d: [0.0; BATCH],
+        grazing: [false; BATCH],
+    };
+    let mut t0 = lo;
+    while t0 < hi {
+        setup_batch(s, t0, hi, &mut batch);
+        for j in 0..BATCH {
+            let mut flag = batch.flag[j];
+            if flag == SKIP {
+                continue;
+            }
+            let t = t0 + j;
+            let mut bb = [batch.bbox[0][j], batch.bbox[1][j], batch.bbox[2][j], batch.bbox[3][j]];
+            if flag == CLIPPED {
+                let [i0, i1, i2] = s.tris[t];
+                let c = |i: u32| s.camera.to_camera(s.positions[i as usize]);
+                let Some([umin, umax, vmin, vmax]) = clipped_bbox([c(i0), c(i1), c(i2)], k) else {
+                    continue;
+                };
+                bb = [
+                    ((umin - 0.5 - BBOX_MARGIN).ceil() as i32).max(0),
+                    ((umax - 0.5 + BBOX_MARGIN).floor() as i32).min(w - 1),
+                    ((vmin - 0.5 - BBOX_MARGIN).ceil() as i32).max(0),
+                    ((vmax - 0.5 + BBOX_MARGIN).floor() as i32).min(h - 1),
+                ];
+                let d = batch.d[j];
+                if bb[0] > bb[1] || bb[2] > bb[3] || !((d > 0.0) & (d < f32::INFINITY)) {
+                    continue;
+                }
+                flag = DRAW;
+            }
+            if flag == DRAW && batch.grazing[j] {
+                flag = PRECISE;
+            }
+            let a = [batch.a[0][j], batch.a[1][j], batch.a[2][j]];
+            let b = [batch.b[0][j], batch.b[1][j], batch.b[2][j]];
+            let c = [batch.c[0][j], batch.c[1][j], batch.c[2][j]];
+            let id = t as u32;
+            let [x0, x1, y0, y1] = bb.map(|x| x as usize);
+            if flag == PRECISE {
+                draw_precise(s, s.tris[t], [a, b, c], id, [x0, x1, y0, y1], zbuf);
+                continue;
+            }
+            let n = [batch.n[0][j], batch.n[1][j], batch.n[2][j]];
+            let mut rc = RowConst { a, r: [0.0; 3], n0: n[0], rw: 0.0, inv_d: 1.0 / batch.d[j], wmin, wmax };
+            let mut w = [0.0f32; LANES];
             for v in y0..=y1 {
                 let py = s.py[v];
-                let r0 = tc.b[0] * py + tc.c[0];
-                let r1 = tc.b[1] * py + tc.c[1];
-                let r2 = tc.b[2] * py + tc.c[2];
-                let rw = tc.n[1] * py + tc.n[2];
+                rc.r = [b[0] * py + c[0], b[1] * py + c[1], b[2] * py + c[2]];
+                rc.rw = n[1] * py + n[2];
                 let row = &mut zbuf[v * wu..v * wu + wu];
-                for u in x0..=x1 {
-                    let px = s.px[u];
-                    let e0 = tc.a[0] * px + r0;
-                    let e1 = tc.a[1] * px + r1;
-                    let e2 = tc.a[2] * px + r2;
-                    let z = tc.d / (tc.n[0] * px + rw);
-                    if e0 >= 0.0 && e1 >= 0.0 && e2 >= 0.0 && z >= zn32 && z <= zf32 {
-                        let key = pack(z, id);
-                        if key < row[u] {
-                            row[u] = key;
+                let mut u = x0;
+                while u <= x1 {
+                    // Coverage and inverse depth of LANES pixels at once, then the z-test of
+                    // the covered ones. The px table is padded with NaN (never covered).
+                    let pxs: &[f32; LANES] = s.px[u..u + LANES].try_into().expect("padded table");
+                    #[cfg(target_arch = "x86_64")]
+                    let mut mask = if AVX {
+                        // SAFETY: AVX is only true in the avx2-enabled build.
+                        unsafe { cover_avx2(&rc, pxs, &mut w) }
+                    } else {
+                        cover_scalar(&rc, pxs, &mut w)
+                    };
+                    #[cfg(not(target_arch = "x86_64"))]
+                    let mut mask = cover_scalar(&rc, pxs, &mut w);
+                    let rem = x1 + 1 - u;
+                    if rem < LANES {
+                        mask &= (1u32 << rem) - 1;
+                    }
+                    while mask != 0 {
+                        let j = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        let key = pack(w[j], id);
+                        let slot = &mut row[u + j];
+                        if key < *slot {
+                            *slot = key;
                         }
                     }
+                    u += LANES;
                 }
             }
         }
+        t0 += BATCH;
     }
 }
 
 /// The pixel loop of a grazing triangle: f32 coverage (the same formula as every other
-/// triangle, to stay watertight), f64 depth and depth-range test.
-#[allow(clippy::too_many_arguments)]
+/// triangle, to stay watertight), depth and depth-range test in f64 from the f64
+/// camera-frame corners.
 #[inline(never)]
 fn draw_precise(
     s: &Setup,
-    tc: &TriConst,
+    corners: [u32; 3],
+    [a, b, c]: [[f32; 3]; 3],
     id: u32,
-    x0: usize,
-    x1: usize,
-    y0: usize,
-    y1: usize,
-    wu: usize,
+    [x0, x1, y0, y1]: [usize; 4],
     zbuf: &mut [u64],
 ) {
-    let (zn, zf) = (s.intr.znear, s.intr.zfar);
+    let [p, q, r] = corners.map(|i| s.camera.to_camera(s.positions[i as usize]));
+    let e1 = [q[0] - p[0], q[1] - p[1], q[2] - p[2]];
+    let e2 = [r[0] - p[0], r[1] - p[1], r[2] - p[2]];
+    let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
+    let d = n[0] * p[0] + n[1] * p[1] + n[2] * p[2];
+    let (zn, zf) = (s.camera.intrinsics.znear, s.camera.intrinsics.zfar);
+    let wu = s.px64.len();
     for v in y0..=y1 {
         let py = s.py[v];
-        let r0 = tc.b[0] * py + tc.c[0];
-        let r1 = tc.b[1] * py + tc.c[1];
-        let r2 = tc.b[2] * py + tc.c[2];
-        let py64 = s.py64[v];
-        let rw = tc.n64[1] * py64 + tc.n64[2];
+        let r0 = b[0] * py + c[0];
+        let r1 = b[1] * py + c[1];
+        let r2 = b[2] * py + c[2];
+        let rw = n[1] * s.py64[v] + n[2];
         let row = &mut zbuf[v * wu..v * wu + wu];
         for u in x0..=x1 {
             let px = s.px[u];
-            let e0 = tc.a[0] * px + r0;
-            let e1 = tc.a[1] * px + r1;
-            let e2 = tc.a[2] * px + r2;
-            if e0 >= 0.0 && e1 >= 0.0 && e2 >= 0.0 {
-                let z = tc.d64 / (tc.n64[0] * s.px64[u] + rw);
+            let e0 = a[0] * px + r0;
+            let e1 = a[1] * px + r1;
+            let e2 = a[2] * px + r2;
+            if (e0 >= 0.0) & (e1 >= 0.0) & (e2 >= 0.0) {
+                // d / (n·r) does not depend on the orientation of n.
+                let z = d / (n[0] * s.px64[u] + rw);
                 if z >= zn && z <= zf {
-                    let key = pack(z as f32, id);
+                    let key = pack((1.0 / z) as f32, id);
                     if key < row[u] {
                         row[u] = key;
                     }
@@ -426,39 +634,9 @@ fn draw_precise(
     }
 }
 
-/// Triangle constants from f64 camera-frame corners; `None` for a triangle whose plane
-/// passes through the camera centre (D = 0: no ray hits it at z > 0) or is degenerate.
-#[inline(always)]
-fn tri_const(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> Option<TriConst> {
-    let n = cross(sub(b, a), sub(c, a));
-    let d = dot(n, a);
-    if d == 0.0 || !d.is_finite() {
-        return None;
-    }
-    let sg = if d > 0.0 { 1.0 } else { -1.0 };
-    let eab = cross(a, b);
-    let ebc = cross(b, c);
-    let eca = cross(c, a);
-    let n = [sg * n[0], sg * n[1], sg * n[2]];
-    let d = sg * d;
-    // cos θ at the farthest corner is the smallest over the triangle: |D| / (|n| · max |p|).
-    let r2 = dot(a, a).max(dot(b, b)).max(dot(c, c));
-    let grazing = d * d < GRAZING_COS * GRAZING_COS * dot(n, n) * r2;
-    let f = |x: f64| (sg * x) as f32;
-    Some(TriConst {
-        a: [f(eab[0]), f(ebc[0]), f(eca[0])],
-        b: [f(eab[1]), f(ebc[1]), f(eca[1])],
-        c: [f(eab[2]), f(ebc[2]), f(eca[2])],
-        n: [n[0] as f32, n[1] as f32, n[2] as f32],
-        d: d as f32,
-        n64: n,
-        d64: d,
-        grazing,
-    })
-}
-
 /// Renders `mesh` from `camera` on the calling thread (allocates fresh buffers; use a
-/// [`Renderer`] to reuse them). Poses/cameras are in the object frame; depth is camera-frame z.
+/// [`Renderer`] to reuse them). Poses/cameras are in the object frame; depth is camera-frame
+/// z, 0 = miss.
 pub fn render(mesh: &Mesh, camera: &Camera) -> Frame {
     let mut frame = Frame::empty(*camera);
     Renderer::new().render_into(mesh, camera, &mut frame);

@@ -8,9 +8,11 @@
 
 pub mod builtin;
 pub mod error;
+pub mod feasibility;
 pub mod tammes;
 pub mod viewset;
 
 pub use error::ViewsError;
+pub use feasibility::{InequalityTolerance, ViewSpace};
 pub use tammes::{best_known_deg, generate, optimize, Effort};
 pub use viewset::{start_pose, ViewSet, START_DIRECTION};

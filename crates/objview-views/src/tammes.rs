@@ -41,6 +41,7 @@ pub enum Effort {
 #[derive(Debug, Clone, Copy)]
 struct Budget {
     random_starts: usize,
+    symmetric_starts: usize,
     riesz_iters: usize,
     hop_batches: usize,
 }
@@ -51,15 +52,16 @@ const HOP_BATCH: usize = 4;
 impl Effort {
     fn budget(self, n: usize) -> Budget {
         match self {
-            Effort::Quick => Budget { random_starts: 2, riesz_iters: 300, hop_batches: 0 },
+            Effort::Quick => Budget { random_starts: 2, symmetric_starts: 0, riesz_iters: 300, hop_batches: 0 },
             Effort::Full => Budget {
                 random_starts: if n <= 64 {
                     24
-                } else if n <= 200 {
-                    12
+                } else if n <= 300 {
+                    24
                 } else {
                     6
                 },
+                symmetric_starts: if n <= 64 { 2 } else { 4 },
                 riesz_iters: 2000,
                 hop_batches: if n <= 64 { 30 } else { 60 },
             },
@@ -102,6 +104,15 @@ pub fn optimize(n: usize, seed: u64, effort: Effort) -> ViewSet {
     for g in icosadeltahedral(n) {
         starts.push(flatten(&g));
     }
+    for (g, group) in symmetry_groups().iter().enumerate() {
+        for (d, orbits) in decompositions(n, group).iter().enumerate() {
+            for k in 0..budget.symmetric_starts {
+                let stream = 10_000 + (g as u64) * 1000 + (d as u64) * 100 + k as u64;
+                let mut rng = stream_rng(seed, n, stream);
+                starts.push(flatten(&symmetric_points(n, group, orbits, &mut rng)));
+            }
+        }
+    }
     for k in 0..budget.random_starts {
         let mut rng = stream_rng(seed, n, 1 + k as u64);
         starts.push(flatten(&random_points(n, &mut rng)));
@@ -111,9 +122,7 @@ pub fn optimize(n: usize, seed: u64, effort: Effort) -> ViewSet {
         .map(|x0| {
             let mut x = x0;
             riesz_schedule(&mut x, budget.riesz_iters);
-            let a0 = chord_to_deg(min_chord(&x));
             let a = refine(&mut x);
-            eprintln!("TRACE start riesz={a0:.5} refined={a:.5}");
             (a, x)
         })
         .collect();
@@ -129,10 +138,10 @@ pub fn optimize(n: usize, seed: u64, effort: Effort) -> ViewSet {
                 // Kicks alternate between global (every point, small) and local (the points
                 // within 3θ of a random point, large) perturbations.
                 match t % 4 {
-                    0 => perturb(&mut x, 0.05 * theta, None, &mut rng),
-                    1 => perturb(&mut x, 0.4 * theta, Some(3.0 * theta), &mut rng),
-                    2 => perturb(&mut x, 0.15 * theta, None, &mut rng),
-                    _ => perturb(&mut x, 0.7 * theta, Some(2.0 * theta), &mut rng),
+                    0 => perturb(&mut x, 0.03 * theta, None, &mut rng),
+                    1 => perturb(&mut x, 0.08 * theta, None, &mut rng),
+                    2 => perturb(&mut x, 0.5 * theta, Some(3.0 * theta), &mut rng),
+                    _ => perturb(&mut x, 0.15 * theta, None, &mut rng),
                 }
                 // Push the kicked configuration back towards the current best angle first.
                 let cos_t = (theta * (1.0 + 1e-3)).cos();
@@ -144,7 +153,6 @@ pub fn optimize(n: usize, seed: u64, effort: Effort) -> ViewSet {
             })
             .collect();
         let (a, x) = pick_best(tries).expect("non-empty batch");
-        eprintln!("TRACE hop {batch} best_try={a:.6} best={best_a:.6}");
         if a > best_a {
             best_a = a;
             best = x;
@@ -264,6 +272,136 @@ pub fn icosadeltahedral(n: usize) -> Vec<Vec<[f64; 3]>> {
         h += 1;
     }
     out
+}
+
+/// A finite rotation group: its matrices and its special orbits (vertices, edge midpoints and
+/// face centres of the polyhedron it was built from).
+struct Group {
+    rots: Vec<[[f64; 3]; 3]>,
+    special: Vec<Vec<[f64; 3]>>,
+}
+
+/// The tetrahedral (12), octahedral (24) and icosahedral (60) rotation groups.
+fn symmetry_groups() -> Vec<Group> {
+    let tet: Vec<[f64; 3]> = vec![[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]];
+    let oct: Vec<[f64; 3]> = vec![
+        [1.0, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+    ];
+    let (ico, _) = icosahedron();
+    [tet, oct, ico]
+        .into_iter()
+        .map(|v| polyhedron_group(&v.into_iter().map(|p| normalize(p).expect("non-zero")).collect::<Vec<_>>()))
+        .collect()
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+fn dot3(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn frame(a: [f64; 3], b: [f64; 3]) -> [[f64; 3]; 3] {
+    let d = dot3(a, b);
+    let u = normalize([b[0] - d * a[0], b[1] - d * a[1], b[2] - d * a[2]]).expect("independent");
+    [a, u, cross(a, u)]
+}
+
+fn apply(r: &[[f64; 3]; 3], p: [f64; 3]) -> [f64; 3] {
+    [dot3(r[0], p), dot3(r[1], p), dot3(r[2], p)]
+}
+
+fn close(a: [f64; 3], b: [f64; 3]) -> bool {
+    (a[0] - b[0]).abs() < 1e-7 && (a[1] - b[1]).abs() < 1e-7 && (a[2] - b[2]).abs() < 1e-7
+}
+
+fn orbit(rots: &[[[f64; 3]; 3]], p: [f64; 3]) -> Vec<[f64; 3]> {
+    let mut out: Vec<[f64; 3]> = Vec::new();
+    for r in rots {
+        let q = apply(r, p);
+        if !out.iter().any(|o| close(*o, q)) {
+            out.push(q);
+        }
+    }
+    out
+}
+
+/// The rotation group of a regular polyhedron given by its unit vertices: every rotation maps
+/// a vertex and one of its nearest neighbours to another such pair.
+fn polyhedron_group(v: &[[f64; 3]]) -> Group {
+    let nearest = v[1..].iter().map(|b| dot3(v[0], *b)).fold(f64::NEG_INFINITY, f64::max);
+    let is_edge = |a: [f64; 3], b: [f64; 3]| (dot3(a, b) - nearest).abs() < 1e-9;
+    let b0 = *v.iter().find(|b| is_edge(v[0], **b)).expect("has a neighbour");
+    let f0 = frame(v[0], b0);
+    let mut rots = Vec::new();
+    for &a in v {
+        for &b in v.iter().filter(|b| is_edge(a, **b)) {
+            let f1 = frame(a, b);
+            // R = F1ᵀ F0 maps the frame of (v0, b0) onto the frame of (a, b).
+            let mut r = [[0.0; 3]; 3];
+            for (i, row) in r.iter_mut().enumerate() {
+                for (j, x) in row.iter_mut().enumerate() {
+                    *x = (0..3).map(|k| f1[k][i] * f0[k][j]).sum();
+                }
+            }
+            rots.push(r);
+        }
+    }
+    let mut edges = Vec::new();
+    for (i, &a) in v.iter().enumerate() {
+        for &b in &v[i + 1..] {
+            if is_edge(a, b) {
+                edges.push(normalize([a[0] + b[0], a[1] + b[1], a[2] + b[2]]).expect("non-antipodal"));
+            }
+        }
+    }
+    // A face centre: the normalized sum of a vertex, a neighbour, and a common neighbour.
+    let c0 = *v.iter().find(|c| is_edge(v[0], **c) && is_edge(b0, **c)).expect("triangular faces");
+    let face = normalize([v[0][0] + b0[0] + c0[0], v[0][1] + b0[1] + c0[1], v[0][2] + b0[2] + c0[2]])
+        .expect("non-zero");
+    let special = vec![v.to_vec(), edges, orbit(&rots, face)];
+    Group { rots, special }
+}
+
+/// Ways to write `n` as (generic orbits) × |G| + a subset of the special orbits, with at least
+/// one generic orbit; each way is the list of special orbits used.
+fn decompositions(n: usize, g: &Group) -> Vec<Vec<usize>> {
+    let order = g.rots.len();
+    let mut out = Vec::new();
+    for mask in 0..(1usize << g.special.len()) {
+        let used: Vec<usize> = (0..g.special.len()).filter(|i| mask & (1 << i) != 0).collect();
+        let fixed: usize = used.iter().map(|&i| g.special[i].len()).sum();
+        if n > fixed && (n - fixed) % order == 0 {
+            out.push(used);
+        }
+    }
+    out
+}
+
+/// A start with the symmetry of `g`: the chosen special orbits plus random generic orbits up
+/// to `n` points.
+fn symmetric_points(
+    n: usize,
+    g: &Group,
+    special: &[usize],
+    rng: &mut ChaCha8Rng,
+) -> Vec<[f64; 3]> {
+    let mut pts: Vec<[f64; 3]> =
+        special.iter().flat_map(|&i| g.special[i].iter().copied()).collect();
+    while pts.len() < n {
+        let p = random_points(1, rng)[0];
+        let o = orbit(&g.rots, p);
+        if o.len() == g.rots.len() && o.iter().all(|q| pts.iter().all(|r| dot3(*q, *r) < 0.999)) {
+            pts.extend(o);
+        }
+    }
+    pts
 }
 
 /// Unit icosahedron vertices and its 20 faces, each counter-clockwise seen from outside.

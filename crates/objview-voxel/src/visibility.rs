@@ -29,7 +29,7 @@
 //! to the last cell before the ray leaves that empty cube, so no cell the walk would enter is
 //! skipped unless it is empty. See `examples/bench_visibility.rs` for measured times.
 
-use crate::key::{center_of, key_of};
+use crate::key::{center_of, floor_i32, key_of, VoxelKey};
 use crate::set::VoxelSet;
 use crate::VoxelError;
 use objview_geom::Mesh;
@@ -43,7 +43,9 @@ pub const DEFAULT_MAX_RANGE: f64 = 6.0;
 /// Distance-field cap: cells farther than this from S_gt store `FIELD_CAP + 1`.
 const FIELD_CAP: u8 = 30;
 /// Smallest stored distance at which the walk leaps instead of stepping.
-const LEAP_MIN: u8 = 3;
+const LEAP_MIN: u8 = 2;
+/// Leaps over cubes of at most this Chebyshev radius advance crossing by crossing.
+const SMALL_LEAP: usize = 2;
 
 /// How O(v) is computed (SPEC §4).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -168,7 +170,117 @@ impl<'a> InverseCaster<'a> {
 
     /// ORs O(v) for `camera` into `bits` (a bitset over set indices, at least
     /// `len.div_ceil(64)` words).
+    ///
+    /// Computed as an exact z-buffer of voxel boxes over the needed pixels, which gives the
+    /// same set as walking every ray ([`InverseCaster::observe_walk_into`]; the tests check
+    /// both against a brute force): pass 1 projects every voxel centre and collects the
+    /// distinct pixels (one ray each); pass 2 projects every voxel's box to a pixel rectangle
+    /// (plus a one-pixel safety margin) and runs an exact slab test against the rays of the
+    /// needed pixels inside it, keeping per ray the box entered first under the walk's
+    /// conventions (entry distance, then the z → y → x order for boxes touched at the same
+    /// instant through an edge or corner). A voxel box reaching the camera plane (z ≤ 1e-9 at a
+    /// corner) is tested against every ray.
     pub fn observe_into(&self, camera: &Camera, bits: &mut [u64]) {
+        let set = self.set;
+        if set.is_empty() {
+            return;
+        }
+        assert!(bits.len() >= set.len().div_ceil(64), "bitset too short");
+        let r = set.resolution();
+        let k = &camera.intrinsics;
+        let (w, h) = (k.width as usize, k.height as usize);
+        let o = camera.center;
+        let tmax = self.max_range;
+        PIXEL_SLOTS.with(|cell| {
+            let mut map = cell.borrow_mut();
+            if map.len() != w * h {
+                map.clear();
+                map.resize(w * h, NONE);
+            }
+            // Pass 1: the distinct pixel rays.
+            let mut rays: Vec<PixelRay> = Vec::new();
+            for key in set.keys() {
+                let Some((u, v)) = pixel_of(k, camera.to_camera(center_of(*key, r))) else {
+                    continue;
+                };
+                let pix = v as usize * w + u as usize;
+                if map[pix] == NONE {
+                    map[pix] = rays.len() as u32;
+                    let d = pixel_ray_direction(camera, u, v);
+                    let inv = [1.0 / d[0], 1.0 / d[1], 1.0 / d[2]];
+                    rays.push(PixelRay { pix: pix as u32, d, inv, best_t: f64::INFINITY, best_n: 0, best: NONE });
+                }
+            }
+            // Pass 2: splat every voxel box onto the needed rays.
+            let lin: [[f64; 3]; 3] = std::array::from_fn(|a| {
+                [camera.right[a] * r, camera.down[a] * r, camera.forward[a] * r]
+            });
+            let mut near_camera = Vec::new();
+            for (i, key) in set.keys().iter().enumerate() {
+                let base = camera.to_camera([key[0] as f64 * r, key[1] as f64 * r, key[2] as f64 * r]);
+                let (mut umin, mut umax, mut vmin, mut vmax) =
+                    (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+                let mut zmin = f64::INFINITY;
+                for c in 0..8 {
+                    let mut q = base;
+                    for (a, l) in lin.iter().enumerate() {
+                        if c >> a & 1 == 1 {
+                            q = [q[0] + l[0], q[1] + l[1], q[2] + l[2]];
+                        }
+                    }
+                    zmin = zmin.min(q[2]);
+                    let (pu, pv) = (k.fx * q[0] / q[2] + k.cx, k.fy * q[1] / q[2] + k.cy);
+                    umin = umin.min(pu);
+                    umax = umax.max(pu);
+                    vmin = vmin.min(pv);
+                    vmax = vmax.max(pv);
+                }
+                if zmin <= 1e-9 {
+                    near_camera.push(i);
+                    continue;
+                }
+                // Pixel centres u + ½ in [umin, umax], with a one-pixel margin for rounding.
+                let u0 = floor_i32(umin - 1.5).max(0);
+                let u1 = floor_i32(umax + 0.5).min(w as i32 - 1);
+                let v0 = floor_i32(vmin - 1.5).max(0);
+                let v1 = floor_i32(vmax + 0.5).min(h as i32 - 1);
+                if u0 > u1 || v0 > v1 {
+                    continue;
+                }
+                for v in v0 as usize..=v1 as usize {
+                    let row = &map[v * w + u0 as usize..=v * w + u1 as usize];
+                    for &s in row {
+                        if s != NONE {
+                            splat(&mut rays[s as usize], *key, i as u32, r, o, tmax);
+                        }
+                    }
+                }
+            }
+            for &i in &near_camera {
+                for ray in rays.iter_mut() {
+                    splat(ray, set.key(i), i as u32, r, o, tmax);
+                }
+            }
+            for ray in &rays {
+                map[ray.pix as usize] = NONE;
+                if ray.best != NONE {
+                    bits[ray.best as usize >> 6] |= 1u64 << (ray.best & 63);
+                }
+            }
+        });
+    }
+
+    /// O(v) for `camera` by walking one ray per projected voxel (3D DDA,
+    /// [`InverseCaster::first_hit`]); the same set as [`InverseCaster::observe`], slower.
+    /// Kept as the literal form of SPEC §4 and as a cross-check.
+    pub fn observe_walk(&self, camera: &Camera) -> Vec<u32> {
+        let mut bits = vec![0u64; self.set.len().div_ceil(64)];
+        self.observe_walk_into(camera, &mut bits);
+        bitset_to_indices(&bits)
+    }
+
+    /// ORs the walked O(v) for `camera` into `bits` (see [`InverseCaster::observe_walk`]).
+    pub fn observe_walk_into(&self, camera: &Camera, bits: &mut [u64]) {
         let set = self.set;
         if set.is_empty() {
             return;
@@ -178,7 +290,7 @@ impl<'a> InverseCaster<'a> {
         let r = set.resolution();
         let k = &camera.intrinsics;
         for key in set.keys() {
-            let Some((u, v)) = k.pixel_of(camera.to_camera(center_of(*key, r))) else {
+            let Some((u, v)) = pixel_of(k, camera.to_camera(center_of(*key, r))) else {
                 continue;
             };
             let d = pixel_ray_direction(camera, u, v);
@@ -259,14 +371,31 @@ impl<'a> InverseCaster<'a> {
                 if te > tmax {
                     return None;
                 }
-                for a in 0..3 {
-                    let (lo, hi) = match step[a] {
-                        1 => (g[a], (g[a] + rad).min(dims[a] - 1)),
-                        -1 => (g[a].saturating_sub(rad), g[a]),
-                        _ => continue,
-                    };
-                    g[a] = cell_at(&pl[a], inv[a], step[a], d[a], r, te, lo, hi, false);
-                    tn[a] = next_crossing(&pl[a], inv[a], step[a], g[a]);
+                if rad <= SMALL_LEAP {
+                    // Short leap: advance each axis crossing by crossing (cheap, no guess).
+                    for a in 0..3 {
+                        if step[a] > 0 {
+                            while tn[a] < te {
+                                g[a] += 1;
+                                tn[a] = pl[a][g[a] + 1] * inv[a];
+                            }
+                        } else if step[a] < 0 {
+                            while tn[a] < te {
+                                g[a] -= 1;
+                                tn[a] = pl[a][g[a]] * inv[a];
+                            }
+                        }
+                    }
+                } else {
+                    for a in 0..3 {
+                        let (lo, hi) = match step[a] {
+                            1 => (g[a], (g[a] + rad).min(dims[a] - 1)),
+                            -1 => (g[a].saturating_sub(rad), g[a]),
+                            _ => continue,
+                        };
+                        g[a] = cell_at(&pl[a], inv[a], step[a], d[a], r, te, lo, hi, false);
+                        tn[a] = next_crossing(&pl[a], inv[a], step[a], g[a]);
+                    }
                 }
                 idx = g[0] * self.strides[0] + g[1] * self.strides[1] + g[2];
             }
@@ -303,8 +432,9 @@ impl<'a> InverseCaster<'a> {
 /// The cell `g ∈ [0, n)` with `p[g] ≤ 0 < p[g+1]`, clamped (callers ensure it exists).
 #[inline]
 fn camera_cell(p: &[f64], r: f64, n: usize) -> usize {
-    let guess = (-p[0] / r).floor();
-    let mut g = if guess <= 0.0 { 0 } else { (guess as usize).min(n - 1) };
+    // A guess (truncation is a floor for the non-negative values that matter), then exact
+    // fix-up against the planes.
+    let mut g = ((-p[0] / r) as i64).clamp(0, n as i64 - 1) as usize;
     while g > 0 && p[g] > 0.0 {
         g -= 1;
     }
@@ -312,6 +442,94 @@ fn camera_cell(p: &[f64], r: f64, n: usize) -> usize {
         g += 1;
     }
     g
+}
+
+/// "No slot / no voxel".
+const NONE: u32 = u32::MAX;
+
+thread_local! {
+    /// Per-thread pixel → ray-slot map of the z-buffer, all `NONE` between calls.
+    static PIXEL_SLOTS: std::cell::RefCell<Vec<u32>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// One needed pixel ray of the z-buffer and the best box found so far.
+struct PixelRay {
+    pix: u32,
+    d: [f64; 3],
+    inv: [f64; 3],
+    /// Entry distance of the best box (0 for a box containing the camera).
+    best_t: f64,
+    /// Number of axes crossed entering the best box at `best_t` (the z → y → x tie order
+    /// visits boxes with fewer such axes first).
+    best_n: u32,
+    best: u32,
+}
+
+/// [`objview_render::Intrinsics::pixel_of`] without `f64::floor` (a libm call on baseline
+/// x86-64): for a projected coordinate `x`, `floor(x) ∈ [0, w)` ⟺ `0 ≤ x < w`, and then
+/// truncation is the floor. Same result for every input (tested).
+#[inline]
+pub(crate) fn pixel_of(k: &objview_render::Intrinsics, p: [f64; 3]) -> Option<(u32, u32)> {
+    let [u, v] = k.project(p)?;
+    if u >= 0.0 && v >= 0.0 && u < k.width as f64 && v < k.height as f64 {
+        Some((u as u32, v as u32))
+    } else {
+        None
+    }
+}
+
+/// Slab test of voxel `key` (closed box `[k·r, (k+1)·r]` per axis) against `ray`, keeping
+/// the better of it and the ray's current best. Mirrors the walk exactly: same plane
+/// crossing times `(k·r − o)·(1/d)`; the box containing the camera centre (half-open, the
+/// walk's start cell) counts at distance 0; an axis
+/// with `d = 0` is inside its half-open slab or never meets it; a box touched only at an edge
+/// or corner instant counts only if the z → y → x order enters it (every axis entering it at
+/// that instant has a higher index than every axis leaving it).
+#[inline]
+fn splat(ray: &mut PixelRay, key: VoxelKey, index: u32, r: f64, o: [f64; 3], tmax: f64) {
+    let mut t0 = [f64::NEG_INFINITY; 3];
+    let mut t1 = [f64::INFINITY; 3];
+    let mut contains = true;
+    for a in 0..3 {
+        let lo = key[a] as f64 * r;
+        let hi = (key[a] + 1) as f64 * r;
+        contains &= lo <= o[a] && o[a] < hi;
+        let d = ray.d[a];
+        if d > 0.0 {
+            t0[a] = (lo - o[a]) * ray.inv[a];
+            t1[a] = (hi - o[a]) * ray.inv[a];
+        } else if d < 0.0 {
+            t0[a] = (hi - o[a]) * ray.inv[a];
+            t1[a] = (lo - o[a]) * ray.inv[a];
+        } else if !(lo <= o[a] && o[a] < hi) {
+            return;
+        }
+    }
+    let t_in = t0[0].max(t0[1]).max(t0[2]);
+    let t_out = t1[0].min(t1[1]).min(t1[2]);
+    let (t, n) = if contains {
+        (0.0, 0) // the walk's start cell
+    } else if t_in > t_out || t_out <= 0.0 || t_in > tmax {
+        return;
+    } else {
+        let mut entering = 0u32;
+        let mut lowest_entering = 3;
+        for a in (0..3).rev() {
+            if t0[a] == t_in {
+                entering += 1;
+                lowest_entering = a;
+            }
+        }
+        if t_in == t_out && (lowest_entering..3).any(|a| t1[a] == t_out && t0[a] != t_in) {
+            return; // touched at one instant, but the walk crosses a leaving axis first
+        }
+        (t_in, entering)
+    };
+    if t < ray.best_t || (t == ray.best_t && n < ray.best_n) {
+        ray.best_t = t;
+        ray.best_n = n;
+        ray.best = index;
+    }
 }
 
 /// Time of the next plane crossing out of cell `g` along an axis.
@@ -341,14 +559,8 @@ fn cell_at(
     inclusive: bool,
 ) -> usize {
     let done = |c: f64| if inclusive { c <= t } else { c < t };
-    let guess = ((t * d - p[0]) / r).floor();
-    let mut g = if guess <= lo as f64 {
-        lo
-    } else if guess >= hi as f64 {
-        hi
-    } else {
-        guess as usize
-    };
+    // Guess from the position (truncation; the fix-up below makes it exact).
+    let mut g = (((t * d - p[0]) / r) as i64).clamp(lo as i64, hi as i64) as usize;
     if step > 0 {
         while g > lo && !done(p[g] * inv) {
             g -= 1;

@@ -16,16 +16,19 @@ use rand_chacha::ChaCha8Rng;
 /// boxes touched only there (zero-length intersection) count only if the walk's documented tie
 /// order (z, then y, then x) enters them: the axes on which the ray enters such a box at that
 /// instant must be crossed before the axes on which it leaves it; among boxes entered at the
-/// same instant, fewer entering axes come first. `Err` if two voxels still tie (never expected).
+/// same instant, fewer entering axes come first. The voxel containing `o` (half-open cells, the
+/// walk's start) wins outright. `Err` if two voxels still tie (never expected).
 fn brute_first(keys: &[VoxelKey], r: f64, o: [f64; 3], d: [f64; 3], tmax: f64) -> Result<Option<usize>, ()> {
     let mut best: Option<((f64, u32), usize)> = None;
     let mut tie = false;
     for (i, k) in keys.iter().enumerate() {
         let mut slab = [(f64::NEG_INFINITY, f64::INFINITY); 3];
         let mut miss = false;
+        let mut contains = true;
         for a in 0..3 {
             let lo = k[a] as f64 * r;
             let hi = (k[a] + 1) as f64 * r;
+            contains &= lo <= o[a] && o[a] < hi;
             if d[a] == 0.0 {
                 // Parallel: inside the half-open slab or never.
                 miss |= !(lo <= o[a] && o[a] < hi);
@@ -37,7 +40,16 @@ fn brute_first(keys: &[VoxelKey], r: f64, o: [f64; 3], d: [f64; 3], tmax: f64) -
         }
         let t_in = slab.iter().map(|s| s.0).fold(f64::NEG_INFINITY, f64::max);
         let t_out = slab.iter().map(|s| s.1).fold(f64::INFINITY, f64::min);
-        if miss || t_in > t_out || t_out <= 0.0 {
+        if miss {
+            continue;
+        }
+        if contains {
+            // The half-open cell of the camera centre: where the walk starts.
+            best = Some(((0.0, 0), i));
+            tie = false;
+            break;
+        }
+        if t_in > t_out || t_out <= 0.0 {
             continue;
         }
         let entering: Vec<usize> = (0..3).filter(|&a| d[a] != 0.0 && slab[a].0 == t_in).collect();
@@ -49,7 +61,7 @@ fn brute_first(keys: &[VoxelKey], r: f64, o: [f64; 3], d: [f64; 3], tmax: f64) -
                 continue;
             }
         }
-        let rank = if t_in < 0.0 { (0.0, 0) } else { (t_in, entering.len() as u32) };
+        let rank = (t_in, entering.len() as u32);
         if rank.0 > tmax {
             continue;
         }
@@ -143,8 +155,10 @@ fn check_views(keys: &[VoxelKey], r: f64, cams: &[Camera]) -> (usize, usize) {
     let (mut checked, mut total) = (0, 0);
     for cam in cams {
         let fast = caster.observe(cam);
+        let walk = caster.observe_walk(cam);
         let Some(slow) = brute_observed(set.keys(), r, cam, 6.0) else { continue };
-        assert_eq!(fast, slow, "camera {:?}", cam.pose);
+        assert_eq!(walk, slow, "walk, camera {:?}", cam.pose);
+        assert_eq!(fast, slow, "z-buffer, camera {:?}", cam.pose);
         checked += 1;
         total += fast.len();
     }

@@ -35,7 +35,9 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
     let (json, blob) = if bytes.starts_with(GLB_MAGIC) {
         split_glb(path, &bytes)?
     } else {
-        let is_glb = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb"));
+        let is_glb = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("glb"));
         if is_glb {
             return Err(GeomError::parse(path, "invalid GLB: missing 'glTF' magic"));
         }
@@ -53,17 +55,26 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
 fn split_glb<'a>(path: &Path, b: &'a [u8]) -> Result<(&'a [u8], Option<&'a [u8]>), GeomError> {
     let bad = |why: String| GeomError::parse(path, format!("invalid GLB: {why}"));
     let u32_at = |o: usize| -> Option<u32> {
-        b.get(o..o + 4).map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
+        b.get(o..o + 4)
+            .map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
     };
     let (Some(version), Some(length)) = (u32_at(4), u32_at(8)) else {
-        return Err(bad(format!("{} bytes, shorter than the 12-byte header", b.len())));
+        return Err(bad(format!(
+            "{} bytes, shorter than the 12-byte header",
+            b.len()
+        )));
     };
     if version != 2 {
-        return Err(bad(format!("container version {version} (only glTF 2.0 is supported)")));
+        return Err(bad(format!(
+            "container version {version} (only glTF 2.0 is supported)"
+        )));
     }
     let length = length as usize;
     if length > b.len() {
-        return Err(bad(format!("header declares {length} bytes but the file has {} (truncated)", b.len())));
+        return Err(bad(format!(
+            "header declares {length} bytes but the file has {} (truncated)",
+            b.len()
+        )));
     }
     let b = &b[..length];
     let (Some(json_len), Some(json_type)) = (u32_at(12), u32_at(16)) else {
@@ -74,7 +85,9 @@ fn split_glb<'a>(path: &Path, b: &'a [u8]) -> Result<(&'a [u8], Option<&'a [u8]>
     }
     let json_end = 20usize.saturating_add(json_len as usize);
     let Some(json) = b.get(20..json_end) else {
-        return Err(bad(format!("JSON chunk of {json_len} bytes runs past the end of the file")));
+        return Err(bad(format!(
+            "JSON chunk of {json_len} bytes runs past the end of the file"
+        )));
     };
     let bin_start = json_end.div_ceil(4) * 4;
     let mut blob = None;
@@ -82,7 +95,9 @@ fn split_glb<'a>(path: &Path, b: &'a [u8]) -> Result<(&'a [u8], Option<&'a [u8]>
         if bin_start + 8 <= b.len() && bin_type == CHUNK_BIN {
             let end = (bin_start + 8).saturating_add(bin_len as usize);
             let Some(bin) = b.get(bin_start + 8..end) else {
-                return Err(bad(format!("BIN chunk of {bin_len} bytes runs past the end of the file")));
+                return Err(bad(format!(
+                    "BIN chunk of {bin_len} bytes runs past the end of the file"
+                )));
             };
             blob = Some(bin);
         }
@@ -103,7 +118,11 @@ fn validate(path: &Path, root: &::gltf::json::Root) -> Result<(), GeomError> {
         errors.push(format!("{s}: {e:?}"));
     });
     if let Some(first) = errors.first() {
-        let more = if errors.len() > 1 { format!(" (and {} more)", errors.len() - 1) } else { String::new() };
+        let more = if errors.len() > 1 {
+            format!(" (and {} more)", errors.len() - 1)
+        } else {
+            String::new()
+        };
         let what = if first.contains("draco") || first.contains("meshopt") {
             "unsupported compressed geometry"
         } else {
@@ -187,14 +206,19 @@ fn resolve_buffers<'a>(
         .buffers()
         .map(|b| {
             let data: Result<Cow<'a, [u8]>, String> = match b.source() {
-                ::gltf::buffer::Source::Bin => {
-                    blob.map(Cow::Borrowed).ok_or_else(|| "GLB has no BIN chunk".to_string())
-                }
+                ::gltf::buffer::Source::Bin => blob
+                    .map(Cow::Borrowed)
+                    .ok_or_else(|| "GLB has no BIN chunk".to_string()),
                 ::gltf::buffer::Source::Uri(uri) => read_uri(path, uri).map(Cow::Owned),
             };
             data.and_then(|d| {
                 if d.len() < b.length() {
-                    Err(format!("buffer {} has {} bytes, declares {}", b.index(), d.len(), b.length()))
+                    Err(format!(
+                        "buffer {} has {} bytes, declares {}",
+                        b.index(),
+                        d.len(),
+                        b.length()
+                    ))
                 } else {
                     Ok(d)
                 }
@@ -206,7 +230,12 @@ fn resolve_buffers<'a>(
 /// A column-major 4×4 affine transform in f64.
 type Mat4 = [[f64; 4]; 4];
 
-const IDENTITY: Mat4 = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
+const IDENTITY: Mat4 = [
+    [1.0, 0.0, 0.0, 0.0],
+    [0.0, 1.0, 0.0, 0.0],
+    [0.0, 0.0, 1.0, 0.0],
+    [0.0, 0.0, 0.0, 1.0],
+];
 
 fn mat_mul(a: &Mat4, b: &Mat4) -> Mat4 {
     let mut r = [[0.0; 4]; 4];
@@ -240,23 +269,43 @@ fn read_component(s: &[u8], t: DataType, normalized: bool) -> f64 {
         DataType::F32 => f32::from_le_bytes([s[0], s[1], s[2], s[3]]) as f64,
         DataType::U32 => {
             let v = u32::from_le_bytes([s[0], s[1], s[2], s[3]]) as f64;
-            if normalized { v / u32::MAX as f64 } else { v }
+            if normalized {
+                v / u32::MAX as f64
+            } else {
+                v
+            }
         }
         DataType::U16 => {
             let v = u16::from_le_bytes([s[0], s[1]]) as f64;
-            if normalized { v / 65535.0 } else { v }
+            if normalized {
+                v / 65535.0
+            } else {
+                v
+            }
         }
         DataType::I16 => {
             let v = i16::from_le_bytes([s[0], s[1]]) as f64;
-            if normalized { (v / 32767.0).max(-1.0) } else { v }
+            if normalized {
+                (v / 32767.0).max(-1.0)
+            } else {
+                v
+            }
         }
         DataType::U8 => {
             let v = s[0] as f64;
-            if normalized { v / 255.0 } else { v }
+            if normalized {
+                v / 255.0
+            } else {
+                v
+            }
         }
         DataType::I8 => {
             let v = s[0] as i8 as f64;
-            if normalized { (v / 127.0).max(-1.0) } else { v }
+            if normalized {
+                (v / 127.0).max(-1.0)
+            } else {
+                v
+            }
         }
     }
 }
@@ -280,7 +329,6 @@ struct Loader<'a, 'b> {
     prim_uv: Vec<[f64; 2]>,
     prim_idx: Vec<u32>,
 }
-
 
 impl<'a, 'b> Loader<'a, 'b> {
     fn new(path: &'a Path, doc: &'a ::gltf::Document, buffers: &'a Buffers<'b>) -> Self {
@@ -351,7 +399,11 @@ impl<'a, 'b> Loader<'a, 'b> {
                 textures: self.textures,
             }
         };
-        Ok(Mesh { positions: self.positions, triangles: self.triangles, appearance })
+        Ok(Mesh {
+            positions: self.positions,
+            triangles: self.triangles,
+            appearance,
+        })
     }
 
     /// Bytes of an accessor's elements: (data starting at element 0, stride, element size).
@@ -376,7 +428,13 @@ impl<'a, 'b> Loader<'a, 'b> {
         let Some(view_bytes) = data.get(view.offset()..view_end) else {
             return Err(self.err(format!("{what}: buffer view outside its buffer")));
         };
-        let need = if count == 0 { 0 } else { offset.saturating_add(stride.saturating_mul(count - 1)).saturating_add(elem) };
+        let need = if count == 0 {
+            0
+        } else {
+            offset
+                .saturating_add(stride.saturating_mul(count - 1))
+                .saturating_add(elem)
+        };
         if need > view_bytes.len() {
             return Err(self.err(format!(
                 "{what}: {count} elements need {need} bytes, buffer view has {}",
@@ -402,7 +460,10 @@ impl<'a, 'b> Loader<'a, 'b> {
             _ => 0,
         };
         if dims != N {
-            return Err(self.err(format!("{what}: expected {N} components, accessor has {:?}", acc.dimensions())));
+            return Err(self.err(format!(
+                "{what}: expected {N} components, accessor has {:?}",
+                acc.dimensions()
+            )));
         }
         let t = acc.data_type();
         let cs = component_size(t);
@@ -412,14 +473,27 @@ impl<'a, 'b> Loader<'a, 'b> {
         out.clear();
         match acc.view() {
             Some(view) => {
-                let (bytes, stride) = self.accessor_bytes(what, &view, acc.offset(), count, elem)?;
+                let (bytes, stride) =
+                    self.accessor_bytes(what, &view, acc.offset(), count, elem)?;
                 out.reserve(count);
                 for i in 0..count {
                     let e = &bytes[i * stride..];
-                    out.push(std::array::from_fn(|c| read_component(&e[c * cs..], t, norm)));
+                    out.push(std::array::from_fn(|c| {
+                        read_component(&e[c * cs..], t, norm)
+                    }));
                 }
             }
-            None => out.resize(count, [0.0; N]),
+            None => {
+                // Zero-initialized (sparse-only) accessor: refuse counts no buffer could back,
+                // so a lying header cannot exhaust memory.
+                let bytes: usize = self.doc.buffers().map(|b| b.length()).sum();
+                if count > bytes.saturating_add(1) {
+                    return Err(self.err(format!(
+                        "{what}: accessor without a buffer view claims {count} elements"
+                    )));
+                }
+                out.resize(count, [0.0; N]);
+            }
         }
         if let Some(sparse) = acc.sparse() {
             let n = sparse.count();
@@ -468,7 +542,10 @@ impl<'a, 'b> Loader<'a, 'b> {
         world: &Mat4,
     ) -> Result<(), GeomError> {
         let mode = prim.mode();
-        if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+        if !matches!(
+            mode,
+            Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+        ) {
             return Ok(());
         }
         let what = format!("mesh {} primitive {}", mesh.index(), prim.index());
@@ -495,7 +572,8 @@ impl<'a, 'b> Loader<'a, 'b> {
         if base + nv > u32::MAX as usize {
             return Err(GeomError::invalid(self.path, "more than 2^32 vertices"));
         }
-        self.positions.extend(pos.iter().map(|&p| transform_point(world, p)));
+        self.positions
+            .extend(pos.iter().map(|&p| transform_point(world, p)));
         self.prim_pos = pos;
 
         // Material and UVs.
@@ -508,7 +586,11 @@ impl<'a, 'b> Loader<'a, 'b> {
         if let Some(info) = &tex_info {
             if let Some(acc) = prim.get(&::gltf::Semantic::TexCoords(info.tex_coord())) {
                 if acc.count() == nv {
-                    self.read_vec::<2>(&format!("{what} TEXCOORD_{}", info.tex_coord()), &acc, &mut uv)?;
+                    self.read_vec::<2>(
+                        &format!("{what} TEXCOORD_{}", info.tex_coord()),
+                        &acc,
+                        &mut uv,
+                    )?;
                     texture = self.texture(info.texture().source());
                     textured = texture.is_some();
                 }
@@ -519,7 +601,10 @@ impl<'a, 'b> Loader<'a, 'b> {
             Some(&m) => m,
             None => {
                 let f = material.pbr_metallic_roughness().base_color_factor();
-                self.materials.push(Material { base_color: [f[0], f[1], f[2]], texture });
+                self.materials.push(Material {
+                    base_color: [f[0], f[1], f[2]],
+                    texture,
+                });
                 let m = (self.materials.len() - 1) as u32;
                 self.material_index.insert(key, m);
                 m
@@ -532,22 +617,29 @@ impl<'a, 'b> Loader<'a, 'b> {
         let b = base as u32;
         match mode {
             Mode::Triangles => {
-                self.triangles.extend(idx.chunks_exact(3).map(|t| [t[0] + b, t[1] + b, t[2] + b]));
+                self.triangles
+                    .extend(idx.chunks_exact(3).map(|t| [t[0] + b, t[1] + b, t[2] + b]));
             }
             Mode::TriangleStrip => {
                 for i in 2..idx.len() {
-                    let (p, q) = if i % 2 == 0 { (idx[i - 2], idx[i - 1]) } else { (idx[i - 1], idx[i - 2]) };
+                    let (p, q) = if i % 2 == 0 {
+                        (idx[i - 2], idx[i - 1])
+                    } else {
+                        (idx[i - 1], idx[i - 2])
+                    };
                     self.triangles.push([p + b, q + b, idx[i] + b]);
                 }
             }
             _ => {
                 for i in 2..idx.len() {
-                    self.triangles.push([idx[0] + b, idx[i - 1] + b, idx[i] + b]);
+                    self.triangles
+                        .push([idx[0] + b, idx[i - 1] + b, idx[i] + b]);
                 }
             }
         }
         let added = self.triangles.len() - before;
-        self.face_material.extend(std::iter::repeat_n(mat_id, added));
+        self.face_material
+            .extend(std::iter::repeat_n(mat_id, added));
         if textured {
             let tris = &self.triangles[before..];
             self.corner_uvs.extend(tris.iter().map(|t| {
@@ -557,7 +649,8 @@ impl<'a, 'b> Loader<'a, 'b> {
                 })
             }));
         } else {
-            self.corner_uvs.extend(std::iter::repeat_n([[0.0f32; 2]; 3], added));
+            self.corner_uvs
+                .extend(std::iter::repeat_n([[0.0f32; 2]; 3], added));
         }
         self.prim_uv = uv;
         Ok(())
@@ -596,11 +689,11 @@ mod tests {
     /// A GLB container around `doc` and `bin`, assembled by hand per the GLB spec.
     fn glb(doc: &Value, bin: &[u8]) -> Vec<u8> {
         let mut j = serde_json::to_vec(doc).unwrap();
-        while j.len() % 4 != 0 {
+        while j.len() & 3 != 0 {
             j.push(b' ');
         }
         let mut b = bin.to_vec();
-        while b.len() % 4 != 0 {
+        while b.len() & 3 != 0 {
             b.push(0);
         }
         let total = 12 + 8 + j.len() + if b.is_empty() { 0 } else { 8 + b.len() };
@@ -668,9 +761,15 @@ mod tests {
         );
         let m = load_mesh(&write(&dir, "a.glb", &glb(&doc, &bin))).unwrap();
         assert_eq!(m.triangles.len(), 2);
-        assert_eq!(m.triangle(0), [[10.0, 0.0, 0.0], [11.0, 0.0, 0.0], [10.0, 1.0, 0.0]]);
+        assert_eq!(
+            m.triangle(0),
+            [[10.0, 0.0, 0.0], [11.0, 0.0, 0.0], [10.0, 1.0, 0.0]]
+        );
         // Child of a scaled parent: p' = 2 (p + (0, 0, 1)).
-        assert_eq!(m.triangle(1), [[0.0, 0.0, 2.0], [2.0, 0.0, 2.0], [0.0, 2.0, 2.0]]);
+        assert_eq!(
+            m.triangle(1),
+            [[0.0, 0.0, 2.0], [2.0, 0.0, 2.0], [0.0, 2.0, 2.0]]
+        );
         assert_eq!(m.appearance, Appearance::None);
 
         // Without a default scene, every scene is loaded.
@@ -686,7 +785,10 @@ mod tests {
             json!([{"nodes": [0]}]),
         );
         let m = load_mesh(&write(&dir, "c.glb", &glb(&doc3, &bin3))).unwrap();
-        assert_eq!(m.triangle(0), [[0.0, 5.0, 0.0], [0.0, 6.0, 0.0], [-1.0, 5.0, 0.0]]);
+        assert_eq!(
+            m.triangle(0),
+            [[0.0, 5.0, 0.0], [0.0, 6.0, 0.0], [-1.0, 5.0, 0.0]]
+        );
     }
 
     #[test]
@@ -719,7 +821,10 @@ mod tests {
         let m = load_mesh(&write(&dir, "s.glb", &glb(&doc, &bin))).unwrap();
         // Strip (v0 v1 v2), (v2 v1 v3) [same winding as the spec's (v1 v3 v2)]; fan (v0 v1 v2),
         // (v0 v2 v3), offset by the 4 vertices of the first primitive. Points/lines skipped.
-        assert_eq!(m.triangles, vec![[0, 1, 2], [2, 1, 3], [4, 5, 6], [4, 6, 7]]);
+        assert_eq!(
+            m.triangles,
+            vec![[0, 1, 2], [2, 1, 3], [4, 5, 6], [4, 6, 7]]
+        );
         assert_eq!(m.positions.len(), 8);
     }
 
@@ -729,7 +834,8 @@ mod tests {
         // 2x1 PNG: left red, right green.
         let img = image::RgbImage::from_raw(2, 1, vec![255, 0, 0, 0, 255, 0]).unwrap();
         let mut png = Vec::new();
-        img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png).unwrap();
+        img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+            .unwrap();
         let mut bin = f32s(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
         bin.extend(f32s(&[0.25, 0.5, 0.75, 0.5, 0.25, 0.5])); // UVs: left, right, left
         let img_off = bin.len();
@@ -764,7 +870,14 @@ mod tests {
         });
         let m = load_mesh(&write(&dir, "t.glb", &glb(&doc, &bin))).unwrap();
         assert_eq!(m.triangles.len(), 2);
-        let Appearance::Textured { textures, materials, .. } = &m.appearance else { panic!() };
+        let Appearance::Textured {
+            textures,
+            materials,
+            ..
+        } = &m.appearance
+        else {
+            panic!()
+        };
         assert_eq!(textures.len(), 1);
         assert_eq!((textures[0].width, textures[0].height), (2, 1));
         assert_eq!(materials.len(), 2);
@@ -785,7 +898,9 @@ mod tests {
         const A: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
         let mut b64 = String::new();
         for ch in bin.chunks(3) {
-            let v = (ch[0] as u32) << 16 | (*ch.get(1).unwrap_or(&0) as u32) << 8 | *ch.get(2).unwrap_or(&0) as u32;
+            let v = (ch[0] as u32) << 16
+                | (*ch.get(1).unwrap_or(&0) as u32) << 8
+                | *ch.get(2).unwrap_or(&0) as u32;
             for k in 0..=ch.len() {
                 b64.push(A[(v >> (18 - 6 * k) & 63) as usize] as char);
             }
@@ -799,7 +914,61 @@ mod tests {
         assert_eq!(m.triangle(0)[2], [0.0, 1.0, 0.0]);
         doc["buffers"][0]["uri"] = json!("missing.bin");
         let e = load_mesh(&write(&dir, "f.gltf", &serde_json::to_vec(&doc).unwrap())).unwrap_err();
-        assert!(e.to_string().contains("f.gltf") && e.to_string().contains("missing.bin"), "{e}");
+        assert!(
+            e.to_string().contains("f.gltf") && e.to_string().contains("missing.bin"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn sparse_and_quantized_interleaved_positions() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut bin = vec![1u8, 2, 0, 0]; // sparse indices (u8) + padding
+        bin.extend(f32s(&[1.0, 0.0, 0.0, 0.0, 1.0, 0.0])); // sparse values
+                                                           // Interleaved: u16 x y z (normalized) + 2 pad bytes, then 4 bytes of another attribute.
+        for v in [[65535u16, 0, 0], [0, 65535, 0], [0, 0, 32768]] {
+            for c in v {
+                bin.extend(c.to_le_bytes());
+            }
+            bin.extend([0u8; 6]);
+        }
+        let doc = json!({
+            "asset": {"version": "2.0"},
+            "extensionsUsed": ["KHR_mesh_quantization"],
+            "extensionsRequired": ["KHR_mesh_quantization"],
+            "scenes": [{"nodes": [0, 1]}],
+            "nodes": [{"mesh": 0}, {"mesh": 1, "translation": [0, 0, 3]}],
+            "meshes": [
+                {"primitives": [{"attributes": {"POSITION": 0}}]},
+                {"primitives": [{"attributes": {"POSITION": 1}}]}
+            ],
+            "buffers": [{"byteLength": bin.len()}],
+            "bufferViews": [
+                {"buffer": 0, "byteOffset": 0, "byteLength": 2},
+                {"buffer": 0, "byteOffset": 4, "byteLength": 24},
+                {"buffer": 0, "byteOffset": 28, "byteLength": 36, "byteStride": 12}
+            ],
+            "accessors": [
+                {"componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0],
+                 "sparse": {"count": 2, "indices": {"bufferView": 0, "componentType": 5121},
+                            "values": {"bufferView": 1}}},
+                {"bufferView": 2, "componentType": 5123, "normalized": true, "count": 3,
+                 "type": "VEC3", "min": [0, 0, 0], "max": [65535, 65535, 32768]}
+            ]
+        });
+        let m = load_mesh(&write(&dir, "q.glb", &glb(&doc, &bin))).unwrap();
+        assert_eq!(
+            m.triangle(0),
+            [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+        );
+        assert_eq!(
+            m.triangle(1),
+            [
+                [1.0, 0.0, 3.0],
+                [0.0, 1.0, 3.0],
+                [0.0, 0.0, 3.0 + 32768.0 / 65535.0]
+            ]
+        );
     }
 
     #[test]
@@ -825,8 +994,12 @@ mod tests {
         let mut nan_bin = bin.clone();
         nan_bin[12..16].copy_from_slice(&f32::NAN.to_le_bytes());
         check(&glb(&doc, &nan_bin), "non-finite");
-        let (doc_oob, bin_oob) = triangle_doc([0, 1, 5], json!([{"mesh": 0}]), json!([{"nodes": [0]}]));
-        check(&glb(&doc_oob, &bin_oob), "index 5 out of range (3 vertices)");
+        let (doc_oob, bin_oob) =
+            triangle_doc([0, 1, 5], json!([{"mesh": 0}]), json!([{"nodes": [0]}]));
+        check(
+            &glb(&doc_oob, &bin_oob),
+            "index 5 out of range (3 vertices)",
+        );
         let mut points = doc.clone();
         points["meshes"][0]["primitives"][0]["mode"] = json!(0);
         check(&glb(&points, &bin), "no triangles");

@@ -84,8 +84,18 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
         }
     }
 
-    let appearance = appearance(&materials, mtl_dir.into_inner(), path, &tri_material, &tri_uvs);
-    Ok(Mesh { positions, triangles, appearance })
+    let appearance = appearance(
+        &materials,
+        mtl_dir.into_inner(),
+        path,
+        &tri_material,
+        &tri_uvs,
+    );
+    Ok(Mesh {
+        positions,
+        triangles,
+        appearance,
+    })
 }
 
 /// Corner UVs of the triangle whose first corner is at `first` in `m.indices`, with v flipped
@@ -119,7 +129,9 @@ fn appearance(
     let mut by_file: HashMap<String, Option<usize>> = HashMap::new();
     let mut mat_texture: Vec<Option<usize>> = vec![None; materials.len()];
     for (i, mat) in materials.iter().enumerate() {
-        let Some(name) = mat.diffuse_texture.as_deref() else { continue };
+        let Some(name) = mat.diffuse_texture.as_deref() else {
+            continue;
+        };
         let name = name.trim().replace('\\', "/");
         if name.is_empty() {
             continue;
@@ -134,10 +146,11 @@ fn appearance(
         mat_texture[i] = *entry;
     }
 
-    let any_used_texture = tri_material
-        .iter()
-        .zip(tri_uvs)
-        .any(|(m, uv)| uv.is_some() && m.and_then(|m| mat_texture.get(m).copied().flatten()).is_some());
+    let any_used_texture = tri_material.iter().zip(tri_uvs).any(|(m, uv)| {
+        uv.is_some()
+            && m.and_then(|m| mat_texture.get(m).copied().flatten())
+                .is_some()
+    });
     if any_used_texture {
         // Material table: (source material or none, textured?) -> index.
         let mut out_materials: Vec<Material> = Vec::new();
@@ -145,7 +158,9 @@ fn appearance(
         let mut face_material = Vec::with_capacity(tri_material.len());
         let mut corner = Vec::with_capacity(tri_material.len());
         for (&m, uv) in tri_material.iter().zip(tri_uvs) {
-            let tex = m.and_then(|m| mat_texture.get(m).copied().flatten()).filter(|_| uv.is_some());
+            let tex = m
+                .and_then(|m| mat_texture.get(m).copied().flatten())
+                .filter(|_| uv.is_some());
             let key = (m.filter(|&m| m < materials.len()), tex.is_some());
             let id = *index.entry(key).or_insert_with(|| {
                 out_materials.push(Material {
@@ -170,7 +185,10 @@ fn appearance(
     }
     if tri_material.iter().any(|&m| diffuse(m).is_some()) {
         return Appearance::FaceColors(
-            tri_material.iter().map(|&m| diffuse(m).unwrap_or(DEFAULT_DIFFUSE)).collect(),
+            tri_material
+                .iter()
+                .map(|&m| diffuse(m).unwrap_or(DEFAULT_DIFFUSE))
+                .collect(),
         );
     }
     Appearance::None
@@ -222,7 +240,11 @@ mod tests {
     #[test]
     fn quad_fan_exact_f64_and_kd_colours() {
         let dir = tempfile::tempdir().unwrap();
-        write(&dir, "m.mtl", b"newmtl red\nKd 1 0 0\nnewmtl blue\nKd 0 0 0.5\n");
+        write(
+            &dir,
+            "m.mtl",
+            b"newmtl red\nKd 1 0 0\nnewmtl blue\nKd 0 0 0.5\n",
+        );
         let obj = b"mtllib m.mtl\nv 0.123456789012345 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\n\
             usemtl red\nf 1 2 3 4\nusemtl blue\nf 1 2 5\n";
         let m = load_mesh(&write(&dir, "m.obj", obj)).unwrap();
@@ -253,15 +275,18 @@ mod tests {
     fn map_kd_texture_with_flipped_v() {
         let dir = tempfile::tempdir().unwrap();
         // 2x2 image: top-left red, top-right green, bottom-left blue, bottom-right white.
-        let img = image::RgbImage::from_raw(2, 2, vec![255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255])
-            .unwrap();
+        let img =
+            image::RgbImage::from_raw(2, 2, vec![255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255])
+                .unwrap();
         img.save(dir.path().join("tex.png")).unwrap();
         write(&dir, "m.mtl", b"newmtl t\nKd 1 1 1\nmap_Kd tex.png\n");
         // vt (0.1, 0.9) is near the top-left in OBJ convention (v up) -> red.
         let obj = b"mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0.1 0.9\nvt 0.9 0.9\nvt 0.1 0.1\n\
             usemtl t\nf 1/1 2/2 3/3\n";
         let m = load_mesh(&write(&dir, "m.obj", obj)).unwrap();
-        let Appearance::Textured { textures, .. } = &m.appearance else { panic!("{:?}", m.appearance) };
+        let Appearance::Textured { textures, .. } = &m.appearance else {
+            panic!("{:?}", m.appearance)
+        };
         assert_eq!(textures.len(), 1);
         assert_eq!(m.color_at(0, [1.0, 0.0, 0.0]), Some([1.0, 0.0, 0.0]));
         assert_eq!(m.color_at(0, [0.0, 1.0, 0.0]), Some([0.0, 1.0, 0.0]));
@@ -283,13 +308,19 @@ mod tests {
         assert!(e.contains("no triangles"), "{e}");
         // Garbage (binary, not UTF-8).
         let e = err(&dir, &[0xff, 0xfe, 0x00, 0x93, 0x12, 0x80, 0x0a, 0xc3]);
-        assert!(e.contains("invalid OBJ") || e.contains("no triangles"), "{e}");
+        assert!(
+            e.contains("invalid OBJ") || e.contains("no triangles"),
+            "{e}"
+        );
         // NaN coordinate.
         let e = err(&dir, b"v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n");
         assert!(e.contains("non-finite"), "{e}");
         // Out-of-range index.
         let e = err(&dir, b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n");
-        assert!(e.contains("out of bounds") || e.contains("references vertex"), "{e}");
+        assert!(
+            e.contains("out of bounds") || e.contains("references vertex"),
+            "{e}"
+        );
         // No faces, only a line element.
         let e = err(&dir, b"v 0 0 0\nv 1 0 0\nl 1 2\n");
         assert!(e.contains("no triangles"), "{e}");

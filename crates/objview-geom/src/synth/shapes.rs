@@ -295,31 +295,26 @@ pub(super) fn gear(b: &mut Builder) {
     // point with the bore point at the same angle gives non-crossing radial cap strips.
     let (teeth, root, tip, bore, half) = (14, 0.78, 1.0, 0.22, 0.125);
     let pitch = TAU / teeth as f64;
-    let mut outline: Vec<P2> = Vec::new();
     let polar = |r: f64, a: f64| [r * a.cos(), r * a.sin()];
-    let seg = |outline: &mut Vec<P2>, from: P2, to: P2, arc_r: Option<f64>| {
-        let (a0, a1) = (from[1].atan2(from[0]), to[1].atan2(to[0]));
-        let a1 = if a1 < a0 { a1 + TAU } else { a1 };
-        let len = match arc_r {
-            Some(r) => r * (a1 - a0),
-            None => ((to[0] - from[0]).powi(2) + (to[1] - from[1]).powi(2)).sqrt(),
-        };
-        let n = pieces(len, b.h);
-        for i in 0..n {
-            let t = i as f64 / n as f64;
-            outline.push(match arc_r {
-                Some(r) => polar(r, a0 + t * (a1 - a0)),
-                None => [from[0] + t * (to[0] - from[0]), from[1] + t * (to[1] - from[1])],
-            });
-        }
+    // Each piece appends its points without its end point (the next piece starts there).
+    let arc = |out: &mut Vec<P2>, r: f64, a0: f64, a1: f64| {
+        let n = pieces(r * (a1 - a0), b.h);
+        out.extend((0..n).map(|i| polar(r, a0 + (a1 - a0) * i as f64 / n as f64)));
     };
+    let line = |out: &mut Vec<P2>, p: P2, q: P2| {
+        let n = pieces((q[0] - p[0]).hypot(q[1] - p[1]), b.h);
+        out.extend((0..n).map(|i| {
+            let t = i as f64 / n as f64;
+            [p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])]
+        }));
+    };
+    let mut outline: Vec<P2> = Vec::new();
     for k in 0..teeth {
-        let a = k as f64 * pitch;
-        let f = [0.0, 0.5, 0.6, 0.9, 1.0].map(|s| a + s * pitch);
-        seg(&mut outline, polar(root, f[0]), polar(root, f[1]), Some(root));
-        seg(&mut outline, polar(root, f[1]), polar(tip, f[2]), None);
-        seg(&mut outline, polar(tip, f[2]), polar(tip, f[3]), Some(tip));
-        seg(&mut outline, polar(tip, f[3]), polar(root, f[4]), None);
+        let f = [0.0, 0.5, 0.6, 0.9, 1.0].map(|s| (k as f64 + s) * pitch);
+        arc(&mut outline, root, f[0], f[1]);
+        line(&mut outline, polar(root, f[1]), polar(tip, f[2]));
+        arc(&mut outline, tip, f[2], f[3]);
+        line(&mut outline, polar(tip, f[3]), polar(root, f[4]));
     }
     // Cross-section loop in (t, z), t = 0 at the bore and 1 on the outline, traversed with the
     // solid on its left: bottom outward, outer wall up, top inward, bore down.
@@ -466,8 +461,9 @@ pub(super) fn helix(b: &mut Builder) {
 }
 
 pub(super) fn trefoil_knot(b: &mut Builder) {
-    // Tube around a trefoil knot; the tube radius (0.15) is below both the centre line's
-    // minimum radius of curvature (0.43) and half its closest approach between strands (0.40).
+    // Tube around a trefoil knot. The tube radius (0.15) is below the centre line's minimum
+    // radius of curvature (0.43) and below half the closest approach of distant strands
+    // (0.40 / 2), so the tube does not intersect itself.
     b.color = PURPLE;
     let path = sample_path(
         b,

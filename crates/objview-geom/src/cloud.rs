@@ -48,9 +48,7 @@ pub fn cloud_count(area: f64) -> usize {
 /// Triangles are drawn in O(1) with Walker's alias table (Vose's construction) over the
 /// triangles of positive area, so zero-area triangles are never chosen.
 pub fn sample_surface(mesh: &Mesh, count: usize, seed: u64) -> Vec<[f64; 3]> {
-    let areas: Vec<f64> = (0..mesh.triangles.len())
-        .map(|t| mesh.triangle_area(t))
-        .collect();
+    let areas: Vec<f64> = (0..mesh.triangles.len()).map(|t| mesh.triangle_area(t)).collect();
     let Some(table) = AliasTable::new(&areas) else {
         return Vec::new();
     };
@@ -65,9 +63,7 @@ pub fn sample_surface(mesh: &Mesh, count: usize, seed: u64) -> Vec<[f64; 3]> {
             v = 1.0 - v;
         }
         let [a, b, c] = mesh.triangle(t);
-        out.push(std::array::from_fn(|k| {
-            a[k] + u * (b[k] - a[k]) + v * (c[k] - a[k])
-        }));
+        out.push(std::array::from_fn(|k| a[k] + u * (b[k] - a[k]) + v * (c[k] - a[k])));
     }
     out
 }
@@ -96,20 +92,10 @@ impl AliasTable {
             return None;
         }
         let m = ids.len();
-        let mut scaled: Vec<f64> = ids
-            .iter()
-            .map(|&i| weights[i as usize] * m as f64 / total)
-            .collect();
-        let mut entries: Vec<AliasEntry> = ids
-            .iter()
-            .map(|&i| AliasEntry {
-                prob: 1.0,
-                own: i,
-                alias: i,
-            })
-            .collect();
-        let (mut small, mut large): (Vec<usize>, Vec<usize>) =
-            (0..m).partition(|&k| scaled[k] < 1.0);
+        let mut scaled: Vec<f64> = ids.iter().map(|&i| weights[i as usize] * m as f64 / total).collect();
+        let mut entries: Vec<AliasEntry> =
+            ids.iter().map(|&i| AliasEntry { prob: 1.0, own: i, alias: i }).collect();
+        let (mut small, mut large): (Vec<usize>, Vec<usize>) = (0..m).partition(|&k| scaled[k] < 1.0);
         while let (Some(&s), Some(&l)) = (small.last(), large.last()) {
             small.pop();
             entries[s].prob = scaled[s];
@@ -140,10 +126,7 @@ impl AliasTable {
 /// columns are x y z), `.npz` (the array named `points`, `xyz` or `arr_0`, else the first).
 /// Empty clouds and non-finite coordinates are errors naming the file.
 pub fn read_cloud(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     let pts = crate::io::catch_panic(path, || match ext.as_deref() {
         Some("pcd") => read_pcd(path),
         Some("ply") => Ok(crate::io::ply::read(path, false)?.positions),
@@ -152,23 +135,13 @@ pub fn read_cloud(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
             npy_points(path, &bytes, "")
         }
         Some("npz") => read_npz(path),
-        _ => Err(GeomError::Unsupported {
-            path: path.to_path_buf(),
-            expected: "pcd, ply, npy, npz",
-        }),
+        _ => Err(GeomError::Unsupported { path: path.to_path_buf(), expected: "pcd, ply, npy, npz" }),
     })?;
     if pts.is_empty() {
         return Err(GeomError::invalid(path, "point cloud has no points"));
     }
-    if let Some((i, p)) = pts
-        .iter()
-        .enumerate()
-        .find(|(_, p)| !p.iter().all(|x| x.is_finite()))
-    {
-        return Err(GeomError::invalid(
-            path,
-            format!("point {i} has a non-finite coordinate {p:?}"),
-        ));
+    if let Some((i, p)) = pts.iter().enumerate().find(|(_, p)| !p.iter().all(|x| x.is_finite())) {
+        return Err(GeomError::invalid(path, format!("point {i} has a non-finite coordinate {p:?}")));
     }
     Ok(pts)
 }
@@ -176,23 +149,16 @@ pub fn read_cloud(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
 /// Points from NPY bytes; `entry` names the NPZ member in errors ("" for a plain .npy).
 fn npy_points(path: &Path, bytes: &[u8], entry: &str) -> Result<Vec<[f64; 3]>, GeomError> {
     let (shape, v) = parse_npy_f64(path, bytes).map_err(|e| match e {
-        GeomError::Parse { path, reason } if !entry.is_empty() => GeomError::Parse {
-            path,
-            reason: format!("entry '{entry}': {reason}"),
-        },
+        GeomError::Parse { path, reason } if !entry.is_empty() => {
+            GeomError::Parse { path, reason: format!("entry '{entry}': {reason}") }
+        }
         e => e,
     })?;
     let [_, k] = shape[..] else {
-        return Err(GeomError::invalid(
-            path,
-            format!("{entry} array of shape {shape:?} is not (n, 3)"),
-        ));
+        return Err(GeomError::invalid(path, format!("{entry} array of shape {shape:?} is not (n, 3)")));
     };
     if k < 3 {
-        return Err(GeomError::invalid(
-            path,
-            format!("{entry} array of shape {shape:?} is not (n, 3)"),
-        ));
+        return Err(GeomError::invalid(path, format!("{entry} array of shape {shape:?} is not (n, 3)")));
     }
     Ok(v.chunks_exact(k).map(|c| [c[0], c[1], c[2]]).collect())
 }
@@ -202,9 +168,8 @@ fn read_npz(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
     let file = std::fs::File::open(path).map_err(|e| GeomError::io(path, e))?;
     let mut zip = zip::ZipArchive::new(std::io::BufReader::new(file))
         .map_err(|e| GeomError::parse(path, format!("invalid NPZ (zip): {e}")))?;
-    let names: Vec<String> = (0..zip.len())
-        .filter_map(|i| zip.by_index(i).ok().map(|f| f.name().to_string()))
-        .collect();
+    let names: Vec<String> =
+        (0..zip.len()).filter_map(|i| zip.by_index(i).ok().map(|f| f.name().to_string())).collect();
     let chosen = ["points.npy", "xyz.npy", "arr_0.npy"]
         .iter()
         .find_map(|want| names.iter().find(|n| n.as_str() == *want))
@@ -274,10 +239,7 @@ pub fn lzf_decompress(input: &[u8], out_len: usize) -> Result<Vec<u8>, String> {
         }
     }
     if out.len() != out_len {
-        return Err(format!(
-            "LZF produced {} bytes, header declares {out_len}",
-            out.len()
-        ));
+        return Err(format!("LZF produced {} bytes, header declares {out_len}", out.len()));
     }
     Ok(out)
 }
@@ -292,42 +254,24 @@ fn read_pcd(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
     let mut pos = 0;
     let mut data_kind = None;
     while pos < bytes.len() {
-        let end = bytes[pos..]
-            .iter()
-            .position(|&b| b == b'\n')
-            .map_or(bytes.len(), |e| pos + e);
-        let line =
-            std::str::from_utf8(&bytes[pos..end]).map_err(|_| bad("header is not text".into()))?;
+        let end = bytes[pos..].iter().position(|&b| b == b'\n').map_or(bytes.len(), |e| pos + e);
+        let line = std::str::from_utf8(&bytes[pos..end]).map_err(|_| bad("header is not text".into()))?;
         pos = (end + 1).min(bytes.len());
         let line = line.split('#').next().unwrap_or("").trim();
         let mut t = line.split_whitespace();
         let Some(key) = t.next() else { continue };
         let vals: Vec<&str> = t.collect();
-        let num = |s: &str| {
-            s.parse::<usize>()
-                .map_err(|_| bad(format!("bad number '{s}' in {key}")))
-        };
+        let num = |s: &str| s.parse::<usize>().map_err(|_| bad(format!("bad number '{s}' in {key}")));
         match key.to_ascii_uppercase().as_str() {
             "VERSION" | "VIEWPOINT" => {}
             "FIELDS" => {
                 fields = vals
                     .iter()
-                    .map(|n| PcdField {
-                        name: n.to_string(),
-                        size: 4,
-                        ty: 'F',
-                        count: 1,
-                    })
+                    .map(|n| PcdField { name: n.to_string(), size: 4, ty: 'F', count: 1 })
                     .collect()
             }
             "SIZE" => sizes = Some(vals.iter().map(|s| num(s)).collect::<Result<Vec<_>, _>>()?),
-            "TYPE" => {
-                types = Some(
-                    vals.iter()
-                        .map(|s| s.chars().next().unwrap_or('?'))
-                        .collect::<Vec<_>>(),
-                )
-            }
+            "TYPE" => types = Some(vals.iter().map(|s| s.chars().next().unwrap_or('?')).collect::<Vec<_>>()),
             "COUNT" => counts = Some(vals.iter().map(|s| num(s)).collect::<Result<Vec<_>, _>>()?),
             "WIDTH" => width = Some(num(vals.first().copied().unwrap_or(""))?),
             "HEIGHT" => height = num(vals.first().copied().unwrap_or(""))?,
@@ -368,10 +312,7 @@ fn read_pcd(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
             f.count = c[i];
         }
         if !matches!(f.size, 1 | 2 | 4 | 8) || f.count > 1 << 20 {
-            return Err(bad(format!(
-                "field '{}' has SIZE {} COUNT {}",
-                f.name, f.size, f.count
-            )));
+            return Err(bad(format!("field '{}' has SIZE {} COUNT {}", f.name, f.size, f.count)));
         }
     }
     let n = match (points, width) {
@@ -404,8 +345,7 @@ fn read_pcd(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
     };
     match kind.as_str() {
         "ascii" => {
-            let text =
-                std::str::from_utf8(data).map_err(|_| bad("ascii data is not text".into()))?;
+            let text = std::str::from_utf8(data).map_err(|_| bad("ascii data is not text".into()))?;
             let per_point: usize = fields.iter().map(|f| f.count).sum();
             let mut out = Vec::with_capacity(n.min(data.len() / 6));
             for line in text.lines() {
@@ -426,17 +366,12 @@ fn read_pcd(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
                 let mut p = [0.0; 3];
                 for k in 0..3 {
                     let s = toks[xyz[k].1];
-                    p[k] = s
-                        .parse()
-                        .map_err(|_| bad(format!("bad number '{s}' in point {}", out.len())))?;
+                    p[k] = s.parse().map_err(|_| bad(format!("bad number '{s}' in point {}", out.len())))?;
                 }
                 out.push(p);
             }
             if out.len() < n {
-                return Err(bad(format!(
-                    "header declares {n} points, data has {} (truncated)",
-                    out.len()
-                )));
+                return Err(bad(format!("header declares {n} points, data has {} (truncated)", out.len())));
             }
             Ok(out)
         }
@@ -456,26 +391,19 @@ fn read_pcd(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
         }
         "binary_compressed" => {
             if data.len() < 8 {
-                return Err(bad(
-                    "binary_compressed data shorter than its 8-byte size header".into(),
-                ));
+                return Err(bad("binary_compressed data shorter than its 8-byte size header".into()));
             }
             let csize = u32::from_le_bytes([data[0], data[1], data[2], data[3]]) as usize;
             let usize_ = u32::from_le_bytes([data[4], data[5], data[6], data[7]]) as usize;
             let Some(comp) = data.get(8..8 + csize) else {
-                return Err(bad(format!(
-                    "compressed block of {csize} bytes is truncated"
-                )));
+                return Err(bad(format!("compressed block of {csize} bytes is truncated")));
             };
             if usize_ != n.saturating_mul(record) {
-                return Err(bad(format!(
-                    "uncompressed size {usize_} != {n} points × {record} bytes"
-                )));
+                return Err(bad(format!("uncompressed size {usize_} != {n} points × {record} bytes")));
             }
             let raw = lzf_decompress(comp, usize_).map_err(bad)?;
             // Field-major layout: all values of field 0, then of field 1, ...
-            let field_start =
-                |i: usize| -> usize { fields[..i].iter().map(|f| n * f.size * f.count).sum() };
+            let field_start = |i: usize| -> usize { fields[..i].iter().map(|f| n * f.size * f.count).sum() };
             let starts = xyz.map(|(i, _, _)| field_start(i));
             Ok((0..n)
                 .map(|p| {
@@ -541,9 +469,7 @@ mod tests {
     }
 
     fn pts() -> Vec<[f64; 3]> {
-        (0..50)
-            .map(|i| [i as f64 * 0.25, -(i as f64) / 8.0, 0.5 + i as f64])
-            .collect()
+        (0..50).map(|i| [i as f64 * 0.25, -(i as f64) / 8.0, 0.5 + i as f64]).collect()
     }
 
     #[test]
@@ -574,10 +500,7 @@ mod tests {
         assert_eq!(read_cloud(&dir.path().join("a.npy")).unwrap(), p);
         // NPZ, stored and deflated, with the cloud not the first member.
         let npy = std::fs::read(dir.path().join("a.npy")).unwrap();
-        for method in [
-            zip::CompressionMethod::Stored,
-            zip::CompressionMethod::Deflated,
-        ] {
+        for method in [zip::CompressionMethod::Stored, zip::CompressionMethod::Deflated] {
             let path = dir.path().join("a.npz");
             let mut z = zip::ZipWriter::new(std::fs::File::create(&path).unwrap());
             let opt = zip::write::SimpleFileOptions::default().compression_method(method);
@@ -595,8 +518,7 @@ mod tests {
     #[test]
     fn pcd_ascii_and_binary_with_extra_fields() {
         let dir = tempfile::tempdir().unwrap();
-        let ascii =
-            "# .PCD v0.7\nVERSION 0.7\nFIELDS rgb x y z normal_x normal_y normal_z curvature\n\
+        let ascii = "# .PCD v0.7\nVERSION 0.7\nFIELDS rgb x y z normal_x normal_y normal_z curvature\n\
             SIZE 4 4 4 4 4 4 4 4\nTYPE F F F F F F F F\nCOUNT 1 1 1 1 1 1 1 1\nWIDTH 2\nHEIGHT 1\n\
             VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n4.2e6 1 2 3 0 0 1 0.5\n\
             4.2e6 -1.5 0.25 7 0 1 0 0\n";
@@ -617,9 +539,7 @@ mod tests {
         let got = read_cloud(&write(&dir, "b.pcd", &b)).unwrap();
         assert_eq!(got, vec![[0.1, 0.2, 0.3], [4.0, -5.0, 6.5]]);
         // Truncated binary.
-        let e = read_cloud(&write(&dir, "c.pcd", &b[..b.len() - 1]))
-            .unwrap_err()
-            .to_string();
+        let e = read_cloud(&write(&dir, "c.pcd", &b[..b.len() - 1])).unwrap_err().to_string();
         assert!(e.contains("c.pcd") && e.contains("truncated"), "{e}");
     }
 
@@ -631,21 +551,11 @@ mod tests {
     fn lzf_and_binary_compressed_pcd() {
         // Literal "abc" (ctrl 2), then a back-reference of 6 bytes at distance 3:
         // len - 2 = 4 -> ctrl = 4 << 5 = 0x80, offset byte = distance - 1 = 2.
-        assert_eq!(
-            lzf_decompress(&[2, b'a', b'b', b'c', 0x80, 2], 9).unwrap(),
-            b"abcabcabc"
-        );
+        assert_eq!(lzf_decompress(&[2, b'a', b'b', b'c', 0x80, 2], 9).unwrap(), b"abcabcabc");
         // Long back-reference: len field 7 + extra byte 3 -> 12 bytes of 'z'.
-        assert_eq!(
-            lzf_decompress(&[0, b'z', 0xE0, 3, 0], 13).unwrap(),
-            vec![b'z'; 13]
-        );
-        assert!(lzf_decompress(&[0x80, 5], 10)
-            .unwrap_err()
-            .contains("before the start"));
-        assert!(lzf_decompress(&[5, 1, 2], 6)
-            .unwrap_err()
-            .contains("past the end"));
+        assert_eq!(lzf_decompress(&[0, b'z', 0xE0, 3, 0], 13).unwrap(), vec![b'z'; 13]);
+        assert!(lzf_decompress(&[0x80, 5], 10).unwrap_err().contains("before the start"));
+        assert!(lzf_decompress(&[5, 1, 2], 6).unwrap_err().contains("past the end"));
         // PCD binary_compressed: fields x y z (f32), field-major, LZF with literal runs only.
         let p = [[1.0f32, 2.0, 3.0], [4.0, 5.0, 6.0]];
         let mut raw = Vec::new();
@@ -674,20 +584,14 @@ mod tests {
     fn bad_clouds_are_errors() {
         let dir = tempfile::tempdir().unwrap();
         let check = |name: &str, bytes: &[u8], want: &str| {
-            let e = read_cloud(&write(&dir, name, bytes))
-                .unwrap_err()
-                .to_string();
+            let e = read_cloud(&write(&dir, name, bytes)).unwrap_err().to_string();
             assert!(e.contains(name) && e.contains(want), "{e}");
         };
         let hdr = "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 1\nPOINTS 1\nDATA ascii\n";
         check("n.pcd", format!("{hdr}0 nan 1\n").as_bytes(), "non-finite");
         check("e.pcd", hdr.replace("1", "0").as_bytes(), "no points");
         check("g.pcd", b"\x89PNG garbage", "invalid PCD");
-        check(
-            "i.pcd",
-            hdr.replace("F F F", "I I I").as_bytes(),
-            "must be TYPE F",
-        );
+        check("i.pcd", hdr.replace("F F F", "I I I").as_bytes(), "must be TYPE F");
         let empty = crate::npy::npy_header("<f8", &[0, 3]);
         check("e.npy", &empty, "no points");
         let mut flat = crate::npy::npy_header("<f8", &[3]);
@@ -712,41 +616,21 @@ mod tests {
                 ]
             })
             .collect();
-        let quads = [
-            [0, 1, 3, 2],
-            [4, 6, 7, 5],
-            [0, 4, 5, 1],
-            [2, 3, 7, 6],
-            [0, 2, 6, 4],
-            [1, 5, 7, 3],
-        ];
-        Mesh::new(
-            positions,
-            quads
-                .iter()
-                .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-                .collect(),
-        )
+        let quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
+        Mesh::new(positions, quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect())
     }
 
     #[test]
     fn samples_lie_inside_a_triangle_uniformly() {
         let (a, b, c) = ([0.3, -0.2, 0.1], [1.1, 0.4, -0.5], [-0.2, 0.9, 0.7]);
         // A zero-area triangle next to it must never be sampled.
-        let m = Mesh::new(
-            vec![a, b, c, [5.0; 3]],
-            vec![[3, 3, 3], [0, 1, 2], [3, 3, 3]],
-        );
+        let m = Mesh::new(vec![a, b, c, [5.0; 3]], vec![[3, 3, 3], [0, 1, 2], [3, 3, 3]]);
         let s = sample_surface(&m, 20_000, 7);
         assert_eq!(s.len(), 20_000);
         let sub = |p: [f64; 3], q: [f64; 3]| [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
         let dot = |p: [f64; 3], q: [f64; 3]| p[0] * q[0] + p[1] * q[1] + p[2] * q[2];
         let (e1, e2) = (sub(b, a), sub(c, a));
-        let n = [
-            e1[1] * e2[2] - e1[2] * e2[1],
-            e1[2] * e2[0] - e1[0] * e2[2],
-            e1[0] * e2[1] - e1[1] * e2[0],
-        ];
+        let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
         let nn = dot(n, n).sqrt();
         let (d11, d12, d22) = (dot(e1, e1), dot(e1, e2), dot(e2, e2));
         let det = d11 * d22 - d12 * d12;
@@ -757,10 +641,7 @@ mod tests {
             let (w1, w2) = (dot(w, e1), dot(w, e2));
             let u = (d22 * w1 - d12 * w2) / det;
             let v = (d11 * w2 - d12 * w1) / det;
-            assert!(
-                u >= -1e-12 && v >= -1e-12 && u + v <= 1.0 + 1e-12,
-                "outside: {u} {v}"
-            );
+            assert!(u >= -1e-12 && v >= -1e-12 && u + v <= 1.0 + 1e-12, "outside: {u} {v}");
             for k in 0..3 {
                 mean[k] += p[k] / s.len() as f64;
             }
@@ -769,11 +650,7 @@ mod tests {
         // so 5 sigma of the mean of 20 000 samples < 0.015).
         for k in 0..3 {
             let centroid = (a[k] + b[k] + c[k]) / 3.0;
-            assert!(
-                (mean[k] - centroid).abs() < 0.015,
-                "axis {k}: {} vs {centroid}",
-                mean[k]
-            );
+            assert!((mean[k] - centroid).abs() < 0.015, "axis {k}: {} vs {centroid}", mean[k]);
         }
     }
 
@@ -800,10 +677,7 @@ mod tests {
             let pr = area / 22.0;
             let expect = n as f64 * pr;
             let sigma = (n as f64 * pr * (1.0 - pr)).sqrt();
-            assert!(
-                (counts[k] as f64 - expect).abs() < 5.0 * sigma,
-                "{counts:?}"
-            );
+            assert!((counts[k] as f64 - expect).abs() < 5.0 * sigma, "{counts:?}");
         }
     }
 
@@ -811,9 +685,7 @@ mod tests {
     fn sampling_is_deterministic() {
         let m = cuboid(1.0, 2.0, 3.0);
         let a = sample_surface(&m, 5000, 42);
-        let b = std::thread::spawn(move || sample_surface(&cuboid(1.0, 2.0, 3.0), 5000, 42))
-            .join()
-            .unwrap();
+        let b = std::thread::spawn(move || sample_surface(&cuboid(1.0, 2.0, 3.0), 5000, 42)).join().unwrap();
         let bits = |v: &[[f64; 3]]| v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&a), bits(&b));
         assert_ne!(bits(&a), bits(&sample_surface(&m, 5000, 43)));

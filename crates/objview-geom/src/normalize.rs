@@ -32,9 +32,7 @@ impl FromStr for Normalization {
         match s {
             "unit" => Ok(Normalization::Unit),
             "none" => Ok(Normalization::None),
-            other => Err(format!(
-                "unknown normalization '{other}' (expected 'unit' or 'none')"
-            )),
+            other => Err(format!("unknown normalization '{other}' (expected 'unit' or 'none')")),
         }
     }
 }
@@ -57,10 +55,7 @@ pub struct Transform {
 
 impl Transform {
     /// The identity transform.
-    pub const IDENTITY: Transform = Transform {
-        center: [0.0; 3],
-        scale: 1.0,
-    };
+    pub const IDENTITY: Transform = Transform { center: [0.0; 3], scale: 1.0 };
 
     /// Maps a point of the file frame to the normalized frame.
     #[inline]
@@ -75,11 +70,7 @@ impl Transform {
 /// origin, then scale uniformly so that the farthest referenced vertex is at distance 1.
 /// `None`: fail with "is not normalized" if the farthest referenced vertex is farther than
 /// [`MAX_PRENORMALIZED_RADIUS`]; otherwise return the mesh unchanged with the identity.
-pub fn normalize(
-    mut mesh: Mesh,
-    mode: Normalization,
-    path: &Path,
-) -> Result<(Mesh, Transform), GeomError> {
+pub fn normalize(mut mesh: Mesh, mode: Normalization, path: &Path) -> Result<(Mesh, Transform), GeomError> {
     let Some((lo, hi)) = mesh.bounds() else {
         return Err(GeomError::invalid(path, "mesh has no triangles"));
     };
@@ -114,10 +105,7 @@ pub fn normalize(
                     format!("cannot normalize: farthest vertex distance from the centre is {r}"),
                 ));
             }
-            let t = Transform {
-                center,
-                scale: 1.0 / r,
-            };
+            let t = Transform { center, scale: 1.0 / r };
             for p in &mut mesh.positions {
                 *p = t.apply(*p);
             }
@@ -146,18 +134,8 @@ mod tests {
                 ]
             })
             .collect();
-        let quads = [
-            [0, 1, 3, 2],
-            [4, 6, 7, 5],
-            [0, 4, 5, 1],
-            [2, 3, 7, 6],
-            [0, 2, 6, 4],
-            [1, 5, 7, 3],
-        ];
-        let triangles = quads
-            .iter()
-            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-            .collect();
+        let quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
+        let triangles = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
         Mesh::new(positions, triangles)
     }
 
@@ -166,10 +144,7 @@ mod tests {
         for m in [Normalization::Unit, Normalization::None] {
             assert_eq!(m.to_string().parse::<Normalization>().unwrap(), m);
         }
-        assert!("Unit!"
-            .parse::<Normalization>()
-            .unwrap_err()
-            .contains("Unit!"));
+        assert!("Unit!".parse::<Normalization>().unwrap_err().contains("Unit!"));
         assert_eq!(Normalization::default(), Normalization::Unit);
     }
 
@@ -201,13 +176,9 @@ mod tests {
         assert_eq!(n, m);
         assert_eq!(t, Transform::IDENTITY);
         let big = cuboid([-0.6; 3], [0.6; 3]); // radius 1.039
-        let e = normalize(big, Normalization::None, Path::new("big.obj"))
-            .unwrap_err()
-            .to_string();
+        let e = normalize(big, Normalization::None, Path::new("big.obj")).unwrap_err().to_string();
         assert!(
-            e.starts_with(
-                "big.obj: is not normalized: farthest vertex at distance 1.039230 > 1.01"
-            ),
+            e.starts_with("big.obj: is not normalized: farthest vertex at distance 1.039230 > 1.01"),
             "{e}"
         );
         assert!(e.contains("--normalize unit"), "{e}");
@@ -215,7 +186,7 @@ mod tests {
 
     #[test]
     fn official_samples_are_prenormalized() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/official/samples");
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/samples");
         let Ok(entries) = std::fs::read_dir(&dir) else {
             eprintln!("skipping: {} not present", dir.display());
             return;

@@ -16,17 +16,9 @@ const MAGIC: &[u8; 6] = b"\x93NUMPY";
 pub fn npy_header(descr: &str, shape: &[usize]) -> Vec<u8> {
     let shape_str = match shape {
         [n] => format!("({n},)"),
-        _ => format!(
-            "({})",
-            shape
-                .iter()
-                .map(|d| d.to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
+        _ => format!("({})", shape.iter().map(|d| d.to_string()).collect::<Vec<_>>().join(", ")),
     };
-    let mut dict =
-        format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape_str}, }}");
+    let mut dict = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape_str}, }}");
     let unpadded = MAGIC.len() + 2 + 2 + dict.len() + 1;
     let pad = unpadded.div_ceil(64) * 64 - unpadded;
     dict.extend(std::iter::repeat_n(' ', pad));
@@ -85,18 +77,9 @@ pub fn read_npy_f64(path: &Path) -> Result<(Vec<usize>, Vec<f64>), GeomError> {
 
 /// Value of `'key': ...` in the header dict, up to the next top-level comma or brace.
 fn dict_value<'h>(header: &'h str, key: &str) -> Option<&'h str> {
-    let start = header
-        .find(&format!("'{key}'"))
-        .or_else(|| header.find(&format!("\"{key}\"")))?;
-    let rest = header[start + key.len() + 2..]
-        .trim_start()
-        .strip_prefix(':')?
-        .trim_start();
-    let end = if rest.starts_with('(') {
-        rest.find(')')? + 1
-    } else {
-        rest.find([',', '}'])?
-    };
+    let start = header.find(&format!("'{key}'")).or_else(|| header.find(&format!("\"{key}\"")))?;
+    let rest = header[start + key.len() + 2..].trim_start().strip_prefix(':')?.trim_start();
+    let end = if rest.starts_with('(') { rest.find(')')? + 1 } else { rest.find([',', '}'])? };
     Some(rest[..end].trim())
 }
 
@@ -108,10 +91,9 @@ pub fn parse_npy_f64(path: &Path, bytes: &[u8]) -> Result<(Vec<usize>, Vec<f64>)
     }
     let (hlen, hstart): (usize, usize) = match bytes[6] {
         1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
-        2 | 3 if bytes.len() >= 12 => (
-            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
-            12,
-        ),
+        2 | 3 if bytes.len() >= 12 => {
+            (u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize, 12)
+        }
         v => return Err(bad(format!("unsupported format version {v}"))),
     };
     let Some(hbytes) = bytes.get(hstart..hstart.saturating_add(hlen)) else {
@@ -123,11 +105,7 @@ pub fn parse_npy_f64(path: &Path, bytes: &[u8]) -> Result<(Vec<usize>, Vec<f64>)
     let width = match descr {
         "<f4" => 4,
         "<f8" => 8,
-        other => {
-            return Err(bad(format!(
-                "dtype '{other}' unsupported (little-endian float32/float64 are)"
-            )))
-        }
+        other => return Err(bad(format!("dtype '{other}' unsupported (little-endian float32/float64 are)"))),
     };
     match dict_value(header, "fortran_order") {
         Some("False") => {}
@@ -143,10 +121,7 @@ pub fn parse_npy_f64(path: &Path, bytes: &[u8]) -> Result<(Vec<usize>, Vec<f64>)
         .split(',')
         .map(str::trim)
         .filter(|s| !s.is_empty())
-        .map(|s| {
-            s.parse::<usize>()
-                .map_err(|_| bad(format!("bad shape '{shape_s}'")))
-        })
+        .map(|s| s.parse::<usize>().map_err(|_| bad(format!("bad shape '{shape_s}'"))))
         .collect::<Result<_, _>>()?;
     let n = shape
         .iter()
@@ -161,10 +136,7 @@ pub fn parse_npy_f64(path: &Path, bytes: &[u8]) -> Result<(Vec<usize>, Vec<f64>)
         )));
     }
     let values = if width == 4 {
-        data[..4 * n]
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64)
-            .collect()
+        data[..4 * n].chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64).collect()
     } else {
         data[..8 * n]
             .chunks_exact(8)
@@ -193,9 +165,7 @@ mod tests {
         assert_eq!(h, expect);
         let h1 = npy_header("<f8", &[7]);
         assert_eq!(h1.len() % 64, 0);
-        assert!(std::str::from_utf8(&h1[10..])
-            .unwrap()
-            .contains("'shape': (7,), }"));
+        assert!(std::str::from_utf8(&h1[10..]).unwrap().contains("'shape': (7,), }"));
     }
 
     #[test]
@@ -220,10 +190,7 @@ mod tests {
         write_npy_f32(&p, &[4, 3], &data).unwrap();
         let b = std::fs::read(&p).unwrap();
         std::fs::write(&p, &b[..b.len() - 1]).unwrap();
-        assert!(read_npy_f64(&p)
-            .unwrap_err()
-            .to_string()
-            .contains("truncated"));
+        assert!(read_npy_f64(&p).unwrap_err().to_string().contains("truncated"));
         // Garbage.
         std::fs::write(&p, b"hello world, not numpy").unwrap();
         assert!(read_npy_f64(&p).unwrap_err().to_string().contains("magic"));

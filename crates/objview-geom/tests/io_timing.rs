@@ -24,10 +24,7 @@ fn grid_glb(n: usize) -> Vec<u8> {
     for i in 0..n - 1 {
         for j in 0..n - 1 {
             let v = (i * n + j) as u32;
-            for t in [
-                [v, v + 1, v + n as u32],
-                [v + 1, v + n as u32 + 1, v + n as u32],
-            ] {
+            for t in [[v, v + 1, v + n as u32], [v + 1, v + n as u32 + 1, v + n as u32]] {
                 for k in t {
                     bin.extend(k.to_le_bytes());
                 }
@@ -97,10 +94,7 @@ fn timings() {
 
     let t = Instant::now();
     let pts = sample_surface(&m, 2_000_000, 0);
-    println!(
-        "sample_surface 2M points: {:.1} ms",
-        t.elapsed().as_secs_f64() * 1e3
-    );
+    println!("sample_surface 2M points: {:.1} ms", t.elapsed().as_secs_f64() * 1e3);
     assert_eq!(pts.len(), 2_000_000);
 
     for name in ["c.pcd", "c.ply"] {
@@ -114,10 +108,7 @@ fn timings() {
         let w = t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();
         let back = read_cloud(&p).unwrap();
-        println!(
-            "{name} 2M points: write {w:.1} ms, read {:.1} ms",
-            t.elapsed().as_secs_f64() * 1e3
-        );
+        println!("{name} 2M points: write {w:.1} ms, read {:.1} ms", t.elapsed().as_secs_f64() * 1e3);
         assert_eq!(back.len(), pts.len());
     }
 }

@@ -403,11 +403,40 @@ unsafe fn cover_avx2(k: &RowConst, px: &[f32; LANES], w: &mut [f32; LANES]) -> u
     _mm256_movemask_ps(m) as u32
 }
 
+/// Loads the corners of triangles `t0 .. t0 + BATCH` (all in range) into `p` with AVX2
+/// gathers. Returns false, loading nothing, when a vertex index is out of range (the
+/// bounds-checked path then reports it).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn gather_avx2(s: &Setup, t0: usize, p: &mut [[[f32; BATCH]; 5]; 3]) -> bool {
+    use std::arch::x86_64::*;
+    const { assert!(BATCH == 8 && std::mem::size_of::<Vert>() == 32) };
+    let base = s.tris[t0..t0 + BATCH].as_ptr() as *const i32;
+    let lane3 = _mm256_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21);
+    let idx = [0, 1, 2].map(|c| _mm256_i32gather_epi32::<4>(base, _mm256_add_epi32(lane3, _mm256_set1_epi32(c))));
+    let mut m = [0u32; 8];
+    _mm256_storeu_si256(m.as_mut_ptr() as *mut __m256i, _mm256_max_epu32(_mm256_max_epu32(idx[0], idx[1]), idx[2]));
+    if m.iter().any(|&i| i as usize >= s.verts.len()) {
+        return false;
+    }
+    let vbase = s.verts.as_ptr() as *const f32;
+    for c in 0..3 {
+        // Element offset of vertex i's component q: 8·i + q (indices < verts.len() ≤ 2²⁸).
+        let off = _mm256_slli_epi32::<3>(idx[c]);
+        for q in 0..5 {
+            let g = _mm256_i32gather_ps::<4>(vbase, _mm256_add_epi32(off, _mm256_set1_epi32(q as i32)));
+            _mm256_storeu_ps(p[c][q].as_mut_ptr(), g);
+        }
+    }
+    true
+}
+
 /// Sets up triangles `t0 .. t0 + BATCH` (lanes past `hi` are skipped): depth-range
 /// rejection, bounding boxes, edge and plane constants, all branch-free so that it
 /// vectorizes.
 #[inline(always)]
-fn setup_batch(s: &Setup, t0: usize, hi: usize, out: &mut Batch) {
+fn setup_batch<const AVX: bool>(s: &Setup, t0: usize, hi: usize, out: &mut Batch) {
     let k = &s.camera.intrinsics;
     let zn32 = k.znear as f32;
     let zf32 = k.zfar as f32;
@@ -416,12 +445,21 @@ fn setup_batch(s: &Setup, t0: usize, hi: usize, out: &mut Batch) {
     // Corner coordinates, structure of arrays: p[corner][x, y, z, u, v][lane].
     let mut p = [[[0.0f32; BATCH]; 5]; 3];
     let last = hi - 1;
-    for j in 0..BATCH {
-        let tri = s.tris[(t0 + j).min(last)];
-        for (c, &i) in tri.iter().enumerate() {
-            let v = &s.verts[i as usize];
-            for q in 0..5 {
-                p[c][q][j] = v[q];
+    #[cfg(target_arch = "x86_64")]
+    let gathered = AVX && t0 + BATCH <= hi && {
+        // SAFETY: AVX is only true in the avx2-enabled build; the batch is in range.
+        unsafe { gather_avx2(s, t0, &mut p) }
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let gathered = false;
+    if !gathered {
+        for j in 0..BATCH {
+            let tri = s.tris[(t0 + j).min(last)];
+            for (c, &i) in tri.iter().enumerate() {
+                let v = &s.verts[i as usize];
+                for q in 0..5 {
+                    p[c][q][j] = v[q];
+                }
             }
         }
     }
@@ -440,10 +478,13 @@ fn setup_batch(s: &Setup, t0: usize, hi: usize, out: &mut Batch) {
         let by0 = (v0.min(v1).min(v2) - 0.5 - BBOX_MARGIN).clamp(-1.0, hf).ceil().max(0.0);
         let by1 = (v0.max(v1).max(v2) - 0.5 + BBOX_MARGIN).clamp(-1.0, hf).floor().min(hf - 1.0);
         let nonempty = (bx0 <= bx1) & (by0 <= by1);
-        out.bbox[0][j] = bx0 as i32;
-        out.bbox[1][j] = bx1 as i32;
-        out.bbox[2][j] = by0 as i32;
-        out.bbox[3][j] = by1 as i32;
+        // SAFETY: max/min never return NaN, so all four are integral values in [−1, w] / [−1, h].
+        unsafe {
+            out.bbox[0][j] = bx0.to_int_unchecked();
+            out.bbox[1][j] = bx1.to_int_unchecked();
+            out.bbox[2][j] = by0.to_int_unchecked();
+            out.bbox[3][j] = by1.to_int_unchecked();
+        }
         // Plane n·p = d with d = [p0, p1, p2]; normalize the sign so that d > 0: then "hit in
         // front" is "all edge functions ≥ 0" and depth = d / (n·r).
         let (ax, ay, az) = (x1 - x0, y1 - y0, z1 - z0);
@@ -508,7 +549,7 @@ fn raster_range_impl<const AVX: bool>(s: &Setup, lo: usize, hi: usize, zbuf: &mu
     };
     let mut t0 = lo;
     while t0 < hi {
-        setup_batch(s, t0, hi, &mut batch);
+        setup_batch::<AVX>(s, t0, hi, &mut batch);
         for j in 0..BATCH {
             let mut flag = batch.flag[j];
             if flag == SKIP {

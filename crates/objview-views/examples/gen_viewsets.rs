@@ -1,10 +1,11 @@
-//! Regenerates the shipped `data/viewsets/tammes-N.txt` files with the Tammes optimizer
-//! (`cargo run --release -p objview-views --example gen_viewsets -- OUTDIR [N ...]`).
+//! Regenerates the shipped `data/viewsets/tammes-N.txt` files with the Tammes optimizer:
+//! `RAYON_NUM_THREADS=1 cargo run --release -p objview-views --example gen_viewsets -- OUTDIR [N ...]`
+//! (without N: the saturation grid of SPEC §4 minus the two official sizes 128 and 360).
 
 use std::path::PathBuf;
 use std::time::Instant;
 
-use objview_views::tammes::{best_known_deg, generate, DEFAULT_SEED, OPTIMIZER_VERSION};
+use objview_views::tammes::{best_known_deg, file_header, generate, DEFAULT_SEED};
 
 /// The saturation grid of SPEC §4 without the two official sizes (128, 360).
 const GRID: &[usize] =
@@ -21,16 +22,7 @@ fn main() {
         let secs = t0.elapsed().as_secs_f64();
         let a = vs.min_angle_deg().expect("n >= 2");
         let bk = best_known_deg(n);
-        let header = vec![
-            format!("tammes-{n}: {n} unit view directions approximately solving the Tammes problem"),
-            format!("generator: {OPTIMIZER_VERSION} (objview_views::tammes::generate), seed {DEFAULT_SEED}"),
-            format!("min_angle_deg: {a:.9}"),
-            match bk {
-                Some(b) => format!("best_known_deg: {b:.9} (ratio {:.6})", a / b),
-                None => "best_known_deg: unknown".to_string(),
-            },
-        ];
-        vs.write(&out.join(format!("tammes-{n}.txt")), &header).expect("write");
+        vs.write(&out.join(format!("tammes-{n}.txt")), &file_header(&vs, DEFAULT_SEED)).expect("write");
         println!(
             "n={n} min_angle_deg={a:.6} best_known={} ratio={} secs={secs:.1}",
             bk.map_or("-".into(), |b| format!("{b:.6}")),

@@ -63,7 +63,9 @@ pub enum ViewsError {
         reason: String,
     },
     /// A view-space name that is neither built in nor a readable file.
-    #[error("view space {spec:?}: not a built-in space (whole, hemi, quarter, eighth) and not a readable file")]
+    #[error(
+        "view space {spec:?}: not a built-in space (whole, hemi, quarter, eighth) and not a readable file"
+    )]
     UnknownViewSpace {
         /// What was asked for.
         spec: String,

@@ -117,14 +117,8 @@ pub enum Op {
     Ne,
 }
 
-const OPS: &[(&str, Op)] = &[
-    (">=", Op::Ge),
-    (">", Op::Gt),
-    ("<=", Op::Le),
-    ("<", Op::Lt),
-    ("==", Op::Eq),
-    ("!=", Op::Ne),
-];
+const OPS: &[(&str, Op)] =
+    &[(">=", Op::Ge), (">", Op::Gt), ("<=", Op::Le), ("<", Op::Lt), ("==", Op::Eq), ("!=", Op::Ne)];
 
 impl Op {
     /// The operator's spelling in rule files.
@@ -211,11 +205,7 @@ pub const BUILTIN_SPACES: &[(&str, &str)] = &[
 ];
 
 fn rule_err(origin: &str, json_path: &str, reason: impl Into<String>) -> ViewsError {
-    ViewsError::Rule {
-        path: origin.to_string(),
-        json_path: json_path.to_string(),
-        reason: reason.into(),
-    }
+    ViewsError::Rule { path: origin.to_string(), json_path: json_path.to_string(), reason: reason.into() }
 }
 
 fn json_type(v: &Value) -> &'static str {
@@ -280,11 +270,7 @@ fn parse_group(origin: &str, path: &str, v: &Value) -> Result<Rule, ViewsError> 
         None => return Err(rule_err(origin, &rules_path, "missing (a non-empty list of rules)")),
         Some(Value::Array(a)) => a,
         Some(other) => {
-            return Err(rule_err(
-                origin,
-                &rules_path,
-                format!("must be a list, found {}", json_type(other)),
-            ))
+            return Err(rule_err(origin, &rules_path, format!("must be a list, found {}", json_type(other))))
         }
     };
     if items.is_empty() {
@@ -299,27 +285,25 @@ fn parse_group(origin: &str, path: &str, v: &Value) -> Result<Rule, ViewsError> 
 }
 
 fn parse_item(origin: &str, path: &str, v: &Value) -> Result<Rule, ViewsError> {
-    let obj = v.as_object().ok_or_else(|| {
-        rule_err(origin, path, format!("a rule must be an object, found {}", json_type(v)))
-    })?;
+    let obj = v
+        .as_object()
+        .ok_or_else(|| rule_err(origin, path, format!("a rule must be an object, found {}", json_type(v))))?;
     if obj.contains_key("rules") || obj.contains_key("logic") {
         return parse_group(origin, path, v);
     }
     check_keys(origin, path, obj, &["field", "op", "value"])?;
     let field = match obj.get("field") {
         None => return Err(rule_err(origin, &format!("{path}.field"), "missing")),
-        Some(Value::String(s)) => FIELDS.iter().find(|(n, _)| n == s).map(|(_, f)| *f).ok_or_else(
-            || {
-                rule_err(
-                    origin,
-                    &format!("{path}.field"),
-                    format!(
-                        "unknown field {s:?} (expected one of {})",
-                        FIELDS.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
-                    ),
-                )
-            },
-        )?,
+        Some(Value::String(s)) => FIELDS.iter().find(|(n, _)| n == s).map(|(_, f)| *f).ok_or_else(|| {
+            rule_err(
+                origin,
+                &format!("{path}.field"),
+                format!(
+                    "unknown field {s:?} (expected one of {})",
+                    FIELDS.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
+                ),
+            )
+        })?,
         Some(other) => {
             return Err(rule_err(
                 origin,
@@ -330,15 +314,13 @@ fn parse_item(origin: &str, path: &str, v: &Value) -> Result<Rule, ViewsError> {
     };
     let op = match obj.get("op") {
         None => return Err(rule_err(origin, &format!("{path}.op"), "missing")),
-        Some(Value::String(s)) => OPS.iter().find(|(n, _)| n == s).map(|(_, o)| *o).ok_or_else(
-            || {
-                rule_err(
-                    origin,
-                    &format!("{path}.op"),
-                    format!("unknown op {s:?} (expected one of >=, >, <=, <, ==, !=)"),
-                )
-            },
-        )?,
+        Some(Value::String(s)) => OPS.iter().find(|(n, _)| n == s).map(|(_, o)| *o).ok_or_else(|| {
+            rule_err(
+                origin,
+                &format!("{path}.op"),
+                format!("unknown op {s:?} (expected one of >=, >, <=, <, ==, !=)"),
+            )
+        })?,
         Some(other) => {
             return Err(rule_err(
                 origin,
@@ -355,9 +337,9 @@ fn parse_item(origin: &str, path: &str, v: &Value) -> Result<Rule, ViewsError> {
 }
 
 fn parse_blocklist(origin: &str, v: &Value) -> Result<Vec<Pose>, ViewsError> {
-    let obj = v.as_object().ok_or_else(|| {
-        rule_err(origin, "blocklist", format!("must be an object, found {}", json_type(v)))
-    })?;
+    let obj = v
+        .as_object()
+        .ok_or_else(|| rule_err(origin, "blocklist", format!("must be an object, found {}", json_type(v))))?;
     check_keys(origin, "blocklist", obj, &["poses"])?;
     let Some(poses) = obj.get("poses") else {
         return Ok(Vec::new());
@@ -473,11 +455,9 @@ impl ViewSpace {
             match obj.get(key) {
                 None => Ok(None),
                 Some(Value::String(s)) => Ok(Some(s.clone())),
-                Some(other) => Err(rule_err(
-                    origin,
-                    key,
-                    format!("must be a string, found {}", json_type(other)),
-                )),
+                Some(other) => {
+                    Err(rule_err(origin, key, format!("must be a string, found {}", json_type(other))))
+                }
             }
         };
         let stem = Path::new(origin.trim_start_matches("builtin:"))
@@ -560,9 +540,7 @@ impl ViewSpace {
 
     fn blocked(&self, pose: &Pose) -> Option<usize> {
         let (a, atol) = (pose.to_array(), self.atol);
-        self.blocklist
-            .iter()
-            .position(|b| b.to_array().iter().zip(&a).all(|(x, y)| (x - y).abs() <= atol))
+        self.blocklist.iter().position(|b| b.to_array().iter().zip(&a).all(|(x, y)| (x - y).abs() <= atol))
     }
 
     /// Whether `pose` is in the space. Non-finite poses are never feasible.

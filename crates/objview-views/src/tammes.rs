@@ -52,15 +52,11 @@ const HOP_BATCH: usize = 4;
 impl Effort {
     fn budget(self, n: usize) -> Budget {
         match self {
-            Effort::Quick => Budget { random_starts: 2, symmetric_starts: 0, riesz_iters: 300, hop_batches: 0 },
+            Effort::Quick => {
+                Budget { random_starts: 2, symmetric_starts: 0, riesz_iters: 300, hop_batches: 0 }
+            }
             Effort::Full => Budget {
-                random_starts: if n <= 64 {
-                    24
-                } else if n <= 300 {
-                    24
-                } else {
-                    6
-                },
+                random_starts: if n <= 300 { 24 } else { 6 },
                 symmetric_starts: if n <= 64 { 2 } else { 4 },
                 riesz_iters: 2000,
                 hop_batches: if n <= 64 { 30 } else { 60 },
@@ -81,6 +77,22 @@ pub fn best_known_deg(n: usize) -> Option<f64> {
         let v: f64 = it.next()?.parse().ok()?;
         (k == n).then_some(v)
     })
+}
+
+/// The `#` header lines written above a generated set: what made it (generator, version,
+/// seed), its minimum angle and the best-known value with their ratio.
+pub fn file_header(vs: &ViewSet, seed: u64) -> Vec<String> {
+    let n = vs.len();
+    let a = vs.min_angle_deg().unwrap_or(180.0);
+    vec![
+        format!("tammes-{n}: {n} unit view directions approximately solving the Tammes problem"),
+        format!("generator: {OPTIMIZER_VERSION} (objview_views::tammes::generate), seed {seed}"),
+        format!("min_angle_deg: {a:.9}"),
+        match best_known_deg(n) {
+            Some(b) => format!("best_known_deg: {b:.9} (ratio {:.6})", a / b),
+            None => "best_known_deg: unknown".to_string(),
+        },
+    ]
 }
 
 /// Runs the optimizer with [`Effort::Full`]: the way the shipped `tammes-N` files were made.
@@ -145,9 +157,7 @@ pub fn optimize(n: usize, seed: u64, effort: Effort) -> ViewSet {
                 }
                 // Push the kicked configuration back towards the current best angle first.
                 let cos_t = (theta * (1.0 + 1e-3)).cos();
-                lbfgs(&mut x, 1000, 0.05 * theta, |y, g| {
-                    on_sphere(y, g, |p, gp| penalty(p, gp, cos_t))
-                });
+                lbfgs(&mut x, 1000, 0.05 * theta, |y, g| on_sphere(y, g, |p, gp| penalty(p, gp, cos_t)));
                 let a = refine(&mut x);
                 (a, x)
             })
@@ -295,7 +305,9 @@ fn symmetry_groups() -> Vec<Group> {
     let (ico, _) = icosahedron();
     [tet, oct, ico]
         .into_iter()
-        .map(|v| polyhedron_group(&v.into_iter().map(|p| normalize(p).expect("non-zero")).collect::<Vec<_>>()))
+        .map(|v| {
+            polyhedron_group(&v.into_iter().map(|p| normalize(p).expect("non-zero")).collect::<Vec<_>>())
+        })
         .collect()
 }
 
@@ -386,14 +398,8 @@ fn decompositions(n: usize, g: &Group) -> Vec<Vec<usize>> {
 
 /// A start with the symmetry of `g`: the chosen special orbits plus random generic orbits up
 /// to `n` points.
-fn symmetric_points(
-    n: usize,
-    g: &Group,
-    special: &[usize],
-    rng: &mut ChaCha8Rng,
-) -> Vec<[f64; 3]> {
-    let mut pts: Vec<[f64; 3]> =
-        special.iter().flat_map(|&i| g.special[i].iter().copied()).collect();
+fn symmetric_points(n: usize, g: &Group, special: &[usize], rng: &mut ChaCha8Rng) -> Vec<[f64; 3]> {
+    let mut pts: Vec<[f64; 3]> = special.iter().flat_map(|&i| g.special[i].iter().copied()).collect();
     while pts.len() < n {
         let p = random_points(1, rng)[0];
         let o = orbit(&g.rots, p);
@@ -524,11 +530,7 @@ fn chord_to_deg(c: f64) -> f64 {
 
 /// Evaluates an objective of the normalized points `p` and maps its gradient (w.r.t. `p`) back
 /// to the unnormalized coordinates `x` (projection onto the tangent plane, divided by |x|).
-fn on_sphere(
-    x: &[f64],
-    g: &mut [f64],
-    mut obj: impl FnMut(&[[f64; 3]], &mut [[f64; 3]]) -> f64,
-) -> f64 {
+fn on_sphere(x: &[f64], g: &mut [f64], mut obj: impl FnMut(&[[f64; 3]], &mut [[f64; 3]]) -> f64) -> f64 {
     let n = x.len() / 3;
     let mut p = Vec::with_capacity(n);
     let mut norms = Vec::with_capacity(n);
@@ -585,7 +587,7 @@ fn penalty(p: &[[f64; 3]], gp: &mut [[f64; 3]], cos_t: f64) -> f64 {
 }
 
 /// Riesz descent with increasing exponent.
-fn riesz_schedule(x: &mut Vec<f64>, iters: usize) {
+fn riesz_schedule(x: &mut [f64], iters: usize) {
     for s in [6.0, 12.0, 24.0, 48.0, 96.0, 192.0] {
         let r0 = min_chord(x);
         // Cut pairs whose term is below 1e-12 of the closest pair's.
@@ -624,12 +626,7 @@ fn refine(x: &mut Vec<f64>) -> f64 {
 
 /// Limited-memory BFGS (memory 8) with backtracking Armijo line search. `step0` is the length
 /// of the first (steepest-descent) step; later steps use the usual curvature scaling.
-fn lbfgs(
-    x: &mut [f64],
-    max_iter: usize,
-    step0: f64,
-    mut f: impl FnMut(&[f64], &mut [f64]) -> f64,
-) -> f64 {
+fn lbfgs(x: &mut [f64], max_iter: usize, step0: f64, mut f: impl FnMut(&[f64], &mut [f64]) -> f64) -> f64 {
     const M: usize = 8;
     let n = x.len();
     let mut g = vec![0.0; n];
@@ -730,4 +727,81 @@ fn lbfgs(
 /// Minimum angle (degrees) of a generated set; convenience wrapper for reports.
 pub fn min_angle_deg(dirs: &[[f64; 3]]) -> f64 {
     min_pairwise_angle_deg(dirs).unwrap_or(180.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rotation_groups_have_the_right_orders_and_orbits() {
+        let groups = symmetry_groups();
+        let orders: Vec<usize> = groups.iter().map(|g| g.rots.len()).collect();
+        assert_eq!(orders, vec![12, 24, 60]);
+        let special: Vec<Vec<usize>> =
+            groups.iter().map(|g| g.special.iter().map(Vec::len).collect()).collect();
+        assert_eq!(special, vec![vec![4, 6, 4], vec![6, 12, 8], vec![12, 30, 20]]);
+        for g in &groups {
+            for r in &g.rots {
+                // Orthonormal with determinant +1.
+                let det = dot3(r[0], cross(r[1], r[2]));
+                assert!((det - 1.0).abs() < 1e-12);
+                for i in 0..3 {
+                    for j in 0..3 {
+                        let want = if i == j { 1.0 } else { 0.0 };
+                        assert!((dot3(r[i], r[j]) - want).abs() < 1e-12);
+                    }
+                }
+            }
+        }
+        // 200 = 3·60 + 20 (icosahedral, face centres) = 16·12 + 4 + 4 (tetrahedral).
+        assert_eq!(decompositions(200, &groups[2]), vec![vec![2]]);
+        assert!(decompositions(200, &groups[0]).contains(&vec![0, 2]));
+        let mut rng = stream_rng(1, 200, 0);
+        let pts = symmetric_points(200, &groups[2], &[2], &mut rng);
+        assert_eq!(pts.len(), 200);
+    }
+
+    #[test]
+    fn gradients_match_finite_differences() {
+        let mut rng = stream_rng(3, 10, 0);
+        let x = flatten(&random_points(10, &mut rng));
+        let r0 = min_chord(&x);
+        let cos_t = 0.3;
+        type Objective = Box<dyn Fn(&[f64], &mut [f64]) -> f64>;
+        let objs: Vec<Objective> = vec![
+            Box::new(move |x: &[f64], g: &mut [f64]| on_sphere(x, g, |p, gp| riesz(p, gp, 6.0, r0, 3.0))),
+            Box::new(move |x: &[f64], g: &mut [f64]| on_sphere(x, g, |p, gp| penalty(p, gp, cos_t))),
+        ];
+        for f in objs {
+            let mut g = vec![0.0; x.len()];
+            f(&x, &mut g);
+            let mut scratch = vec![0.0; x.len()];
+            for k in 0..x.len() {
+                let h = 1e-6;
+                let (mut xp, mut xm) = (x.clone(), x.clone());
+                xp[k] += h;
+                xm[k] -= h;
+                let fd = (f(&xp, &mut scratch) - f(&xm, &mut scratch)) / (2.0 * h);
+                assert!((fd - g[k]).abs() <= 1e-5 * (1.0 + g[k].abs()), "k={k}: {fd} vs {}", g[k]);
+            }
+        }
+    }
+
+    #[test]
+    fn lbfgs_minimizes_a_quadratic() {
+        let mut x = vec![3.0, -2.0, 1.0];
+        let f = |x: &[f64], g: &mut [f64]| {
+            let w = [1.0, 10.0, 100.0];
+            let mut v = 0.0;
+            for i in 0..3 {
+                v += w[i] * (x[i] - 1.0).powi(2);
+                g[i] = 2.0 * w[i] * (x[i] - 1.0);
+            }
+            v
+        };
+        let v = lbfgs(&mut x, 200, 0.1, f);
+        assert!(v < 1e-12, "{v}");
+        assert!(x.iter().all(|xi| (xi - 1.0).abs() < 1e-6), "{x:?}");
+    }
 }

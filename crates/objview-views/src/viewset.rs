@@ -17,11 +17,8 @@ use crate::error::ViewsError;
 
 /// The start view direction of every episode (SPEC §3): normalize(1, 1, 1), feasible in every
 /// built-in view space.
-pub const START_DIRECTION: [f64; 3] = [
-    0.577_350_269_189_625_8,
-    0.577_350_269_189_625_8,
-    0.577_350_269_189_625_8,
-];
+pub const START_DIRECTION: [f64; 3] =
+    [0.577_350_269_189_625_8, 0.577_350_269_189_625_8, 0.577_350_269_189_625_8];
 
 /// A named list of unit view directions.
 #[derive(Debug, Clone, PartialEq)]
@@ -95,26 +92,17 @@ impl ViewSet {
             if content.is_empty() {
                 continue;
             }
-            let bad = |reason: String| ViewsError::ViewSetLine {
-                path: origin.to_string(),
-                line: line_no,
-                reason,
-            };
-            let parts: Vec<&str> = content
-                .split(|c: char| c.is_whitespace() || c == ',')
-                .filter(|p| !p.is_empty())
-                .collect();
+            let bad =
+                |reason: String| ViewsError::ViewSetLine { path: origin.to_string(), line: line_no, reason };
+            let parts: Vec<&str> =
+                content.split(|c: char| c.is_whitespace() || c == ',').filter(|p| !p.is_empty()).collect();
             if parts.len() != 3 {
-                return Err(bad(format!(
-                    "expected 3 numbers `x y z`, found {} in {content:?}",
-                    parts.len()
-                )));
+                return Err(bad(format!("expected 3 numbers `x y z`, found {} in {content:?}", parts.len())));
             }
             let mut v = [0.0; 3];
             for (k, p) in parts.iter().enumerate() {
-                let x: f64 = p
-                    .parse()
-                    .map_err(|_| bad(format!("{} is not a number: {p:?}", ["x", "y", "z"][k])))?;
+                let x: f64 =
+                    p.parse().map_err(|_| bad(format!("{} is not a number: {p:?}", ["x", "y", "z"][k])))?;
                 if !x.is_finite() {
                     return Err(bad(format!("{} is not finite: {p:?}", ["x", "y", "z"][k])));
                 }

@@ -13,8 +13,8 @@ fn data_dir() -> PathBuf {
 
 /// The saturation grid of SPEC §4.
 const GRID: &[usize] = &[
-    6, 8, 10, 12, 14, 16, 20, 24, 28, 32, 40, 48, 56, 64, 80, 96, 112, 128, 144, 160, 180, 200,
-    270, 360, 432, 492,
+    6, 8, 10, 12, 14, 16, 20, 24, 28, 32, 40, 48, 56, 64, 80, 96, 112, 128, 144, 160, 180, 200, 270, 360,
+    432, 492,
 ];
 
 #[test]
@@ -58,8 +58,7 @@ fn parse_errors_name_file_and_line() {
 
 #[test]
 fn write_load_roundtrip_is_bit_identical_and_deterministic() {
-    let vs = ViewSet::from_dirs("x", &[[1.0, 2.0, 3.0], [-0.1, 1e-20, 7.0], [0.3, -0.7, 0.2]])
-        .unwrap();
+    let vs = ViewSet::from_dirs("x", &[[1.0, 2.0, 3.0], [-0.1, 1e-20, 7.0], [0.3, -0.7, 0.2]]).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("v.txt");
     vs.write(&p, &["a header".to_string()]).unwrap();
@@ -80,15 +79,11 @@ fn write_load_roundtrip_is_bit_identical_and_deterministic() {
 fn min_angle_of_known_configurations() {
     // Two directions 1 degree apart in the xy plane.
     let t = 1f64.to_radians();
-    assert!((min_pairwise_angle_deg(&[[1.0, 0.0, 0.0], [t.cos(), t.sin(), 0.0]]).unwrap() - 1.0)
-        .abs()
-        < 1e-12);
+    assert!(
+        (min_pairwise_angle_deg(&[[1.0, 0.0, 0.0], [t.cos(), t.sin(), 0.0]]).unwrap() - 1.0).abs() < 1e-12
+    );
     // Octahedron: 90 degrees; a cube's vertex directions: acos(1/3) = 70.5288 degrees.
-    let oct = ViewSet::parse(
-        "oct",
-        "1 0 0\n-1 0 0\n0 1 0\n0 -1 0\n0 0 1\n0 0 -1\n",
-    )
-    .unwrap();
+    let oct = ViewSet::parse("oct", "1 0 0\n-1 0 0\n0 1 0\n0 -1 0\n0 0 1\n0 0 -1\n").unwrap();
     assert!((oct.min_angle_deg().unwrap() - 90.0).abs() < 1e-12);
     let mut cube = String::new();
     for x in [-1, 1] {

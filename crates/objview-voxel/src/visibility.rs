@@ -104,6 +104,10 @@ pub struct InverseCaster<'a> {
     dims: [usize; 3],
     strides: [usize; 3],
     max_range: f64,
+    /// Set indices sorted by (y, z, x) and by (z, x, y): with the natural (x, y, z) order they
+    /// let the z-buffer visit voxels slice by slice from the camera side.
+    by_y: Vec<u32>,
+    by_z: Vec<u32>,
 }
 
 /// Per-view constants: plane offsets `k·r − o` for every grid plane, per axis.
@@ -122,7 +126,18 @@ impl<'a> InverseCaster<'a> {
     pub fn with_max_range(set: &'a VoxelSet, max_range: f64) -> InverseCaster<'a> {
         let dims = set.grid_dims();
         let strides = [dims[1] * dims[2], dims[2], 1];
-        InverseCaster { set, field: distance_field(set), dims, strides, max_range }
+        let keys = set.keys();
+        let mut by_y: Vec<u32> = (0..keys.len() as u32).collect();
+        by_y.sort_by_key(|&i| {
+            let k = keys[i as usize];
+            (k[1], k[2], k[0])
+        });
+        let mut by_z: Vec<u32> = (0..keys.len() as u32).collect();
+        by_z.sort_by_key(|&i| {
+            let k = keys[i as usize];
+            (k[2], k[0], k[1])
+        });
+        InverseCaster { set, field: distance_field(set), dims, strides, max_range, by_y, by_z }
     }
 
     /// The set this caster walks.
@@ -216,7 +231,22 @@ impl<'a> InverseCaster<'a> {
                 [camera.right[a] * r, camera.down[a] * r, camera.forward[a] * r]
             });
             let mut near_camera = Vec::new();
-            for (i, key) in set.keys().iter().enumerate() {
+            let (order, descending) = self.front_to_back(o);
+            let n = set.len();
+            let half_diag = 0.5 * 3f64.sqrt() * r;
+            for j in 0..n {
+                let j = if descending { n - 1 - j } else { j };
+                let i = match order {
+                    1 => self.by_y[j] as usize,
+                    2 => self.by_z[j] as usize,
+                    _ => j,
+                };
+                let key = &set.keys()[i];
+                // Lower bound on the distance at which any ray enters this box.
+                let c = center_of(*key, r);
+                let dc = [c[0] - o[0], c[1] - o[1], c[2] - o[2]];
+                let near = (dc[0] * dc[0] + dc[1] * dc[1] + dc[2] * dc[2]).sqrt() - half_diag;
+                let near = near - 1e-9 * near.abs() - 1e-12;
                 let base = camera.to_camera([key[0] as f64 * r, key[1] as f64 * r, key[2] as f64 * r]);
                 let (mut umin, mut umax, mut vmin, mut vmax) =
                     (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
@@ -251,7 +281,11 @@ impl<'a> InverseCaster<'a> {
                     let row = &map[v * w + u0 as usize..=v * w + u1 as usize];
                     for &s in row {
                         if s != NONE {
-                            splat(&mut rays[s as usize], *key, i as u32, r, o, tmax);
+                            let ray = &mut rays[s as usize];
+                            // Boxes visited front to back: most later ones lose at once.
+                            if ray.best_t >= near {
+                                splat(ray, *key, i as u32, r, o, tmax);
+                            }
                         }
                     }
                 }
@@ -268,6 +302,24 @@ impl<'a> InverseCaster<'a> {
                 }
             }
         });
+    }
+
+    /// The voxel order for the z-buffer: axis (0 = natural x order, 1 = `by_y`, 2 = `by_z`)
+    /// and direction such that slices nearer the camera come first. Any order gives the same
+    /// result; this one makes the early rejection effective.
+    fn front_to_back(&self, o: [f64; 3]) -> (usize, bool) {
+        let r = self.set.resolution();
+        let g0 = self.set.grid_origin();
+        let (mut best, mut gap, mut desc) = (0, 0.0, false);
+        for a in 0..3 {
+            let lo = g0[a] as f64 * r;
+            let hi = (g0[a] as f64 + self.dims[a] as f64) * r;
+            let (g, dsc) = if o[a] > hi { (o[a] - hi, true) } else { (lo - o[a], false) };
+            if g > gap {
+                (best, gap, desc) = (a, g, dsc);
+            }
+        }
+        (best, desc)
     }
 
     /// O(v) for `camera` by walking one ray per projected voxel (3D DDA,
@@ -728,6 +780,8 @@ impl<'a> Visibility<'a> {
                 dims: set.grid_dims(),
                 strides: [0; 3],
                 max_range,
+                by_y: Vec::new(),
+                by_z: Vec::new(),
             },
         };
         Visibility { mode, mesh, caster }

@@ -12,8 +12,10 @@
 //! (strips/fans converted to lists), indexed or not; points and lines are skipped. Positions
 //! may be float or (KHR_mesh_quantization) integer, normalized or not; sparse accessors are
 //! applied. Appearance: each material's baseColorFactor and baseColorTexture (PNG/JPEG, with
-//! the texture's own TEXCOORD set) give [`Appearance::Textured`]; KHR_texture_transform and
-//! vertex colours are ignored. Geometry-compression extensions (Draco, meshopt) are reported
+//! the texture's own TEXCOORD set) give [`Appearance::Textured`] (the diffuse factor/texture
+//! for KHR_materials_pbrSpecularGlossiness materials); KHR_texture_transform and vertex
+//! colours are ignored; a document whose textures have no `source` (WebP/Basis images given
+//! only by an extension) is loaded without textures. Geometry-compression extensions (Draco, meshopt) are reported
 //! as unsupported.
 
 use crate::mesh::{Appearance, Material, Texture};
@@ -35,17 +37,25 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
     let (json, blob) = if bytes.starts_with(GLB_MAGIC) {
         split_glb(path, &bytes)?
     } else {
-        let is_glb = path
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("glb"));
+        let is_glb = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb"));
         if is_glb {
             return Err(GeomError::parse(path, "invalid GLB: missing 'glTF' magic"));
         }
         (&bytes[..], None)
     };
-    let root = ::gltf::json::Root::from_slice(json)
-        .map_err(|e| GeomError::parse(path, format!("invalid glTF JSON: {e}")))?;
-    validate(path, &root)?;
+    let root = match ::gltf::json::Root::from_slice(json) {
+        Ok(root) => root,
+        Err(e) => without_sourceless_textures(json)
+            .ok_or_else(|| GeomError::parse(path, format!("invalid glTF JSON: {e}")))?,
+    };
+    let root = match validate(path, &root) {
+        Ok(()) => root,
+        Err(e) => {
+            let stripped = without_sourceless_textures(json).ok_or(e)?;
+            validate(path, &stripped)?;
+            stripped
+        }
+    };
     let doc = ::gltf::Document::from_json_without_validation(root);
     let buffers = resolve_buffers(path, &doc, blob)?;
     Loader::new(path, &doc, &buffers).run()
@@ -54,27 +64,17 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
 /// Splits a GLB container into its JSON chunk and optional BIN chunk.
 fn split_glb<'a>(path: &Path, b: &'a [u8]) -> Result<(&'a [u8], Option<&'a [u8]>), GeomError> {
     let bad = |why: String| GeomError::parse(path, format!("invalid GLB: {why}"));
-    let u32_at = |o: usize| -> Option<u32> {
-        b.get(o..o + 4)
-            .map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
-    };
+    let u32_at =
+        |o: usize| -> Option<u32> { b.get(o..o + 4).map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]])) };
     let (Some(version), Some(length)) = (u32_at(4), u32_at(8)) else {
-        return Err(bad(format!(
-            "{} bytes, shorter than the 12-byte header",
-            b.len()
-        )));
+        return Err(bad(format!("{} bytes, shorter than the 12-byte header", b.len())));
     };
     if version != 2 {
-        return Err(bad(format!(
-            "container version {version} (only glTF 2.0 is supported)"
-        )));
+        return Err(bad(format!("container version {version} (only glTF 2.0 is supported)")));
     }
     let length = length as usize;
     if length > b.len() {
-        return Err(bad(format!(
-            "header declares {length} bytes but the file has {} (truncated)",
-            b.len()
-        )));
+        return Err(bad(format!("header declares {length} bytes but the file has {} (truncated)", b.len())));
     }
     let b = &b[..length];
     let (Some(json_len), Some(json_type)) = (u32_at(12), u32_at(16)) else {
@@ -85,9 +85,7 @@ fn split_glb<'a>(path: &Path, b: &'a [u8]) -> Result<(&'a [u8], Option<&'a [u8]>
     }
     let json_end = 20usize.saturating_add(json_len as usize);
     let Some(json) = b.get(20..json_end) else {
-        return Err(bad(format!(
-            "JSON chunk of {json_len} bytes runs past the end of the file"
-        )));
+        return Err(bad(format!("JSON chunk of {json_len} bytes runs past the end of the file")));
     };
     let bin_start = json_end.div_ceil(4) * 4;
     let mut blob = None;
@@ -95,14 +93,43 @@ fn split_glb<'a>(path: &Path, b: &'a [u8]) -> Result<(&'a [u8], Option<&'a [u8]>
         if bin_start + 8 <= b.len() && bin_type == CHUNK_BIN {
             let end = (bin_start + 8).saturating_add(bin_len as usize);
             let Some(bin) = b.get(bin_start + 8..end) else {
-                return Err(bad(format!(
-                    "BIN chunk of {bin_len} bytes runs past the end of the file"
-                )));
+                return Err(bad(format!("BIN chunk of {bin_len} bytes runs past the end of the file")));
             };
             blob = Some(bin);
         }
     }
     Ok((json, blob))
+}
+
+/// Fallback for documents the `gltf` crate refuses because a texture has no `source` (its
+/// image is only given by an extension such as EXT_texture_webp or KHR_texture_basisu, which
+/// Objaverse assets use): drop all textures and texture references, keep geometry and base
+/// colours. `None` if the document is not such a case (the original error is reported).
+fn without_sourceless_textures(json: &[u8]) -> Option<::gltf::json::Root> {
+    let mut v: serde_json::Value = serde_json::from_slice(json).ok()?;
+    let textures = v.get("textures")?.as_array()?;
+    if textures.iter().all(|t| t.get("source").is_some()) {
+        return None;
+    }
+    let obj = v.as_object_mut()?;
+    for key in ["textures", "images", "samplers"] {
+        obj.remove(key);
+    }
+    /// Removes every `...Texture` key (a texture reference) below a material.
+    fn strip(v: &mut serde_json::Value) {
+        match v {
+            serde_json::Value::Object(m) => {
+                m.retain(|k, _| !k.ends_with("Texture"));
+                m.values_mut().for_each(strip);
+            }
+            serde_json::Value::Array(a) => a.iter_mut().for_each(strip),
+            _ => {}
+        }
+    }
+    if let Some(mats) = obj.get_mut("materials") {
+        strip(mats);
+    }
+    ::gltf::json::Root::from_slice(&serde_json::to_vec(&v).ok()?).ok()
 }
 
 /// Validates the document's references; `extensionsRequired` entries are tolerated except
@@ -118,11 +145,7 @@ fn validate(path: &Path, root: &::gltf::json::Root) -> Result<(), GeomError> {
         errors.push(format!("{s}: {e:?}"));
     });
     if let Some(first) = errors.first() {
-        let more = if errors.len() > 1 {
-            format!(" (and {} more)", errors.len() - 1)
-        } else {
-            String::new()
-        };
+        let more = if errors.len() > 1 { format!(" (and {} more)", errors.len() - 1) } else { String::new() };
         let what = if first.contains("draco") || first.contains("meshopt") {
             "unsupported compressed geometry"
         } else {
@@ -206,19 +229,14 @@ fn resolve_buffers<'a>(
         .buffers()
         .map(|b| {
             let data: Result<Cow<'a, [u8]>, String> = match b.source() {
-                ::gltf::buffer::Source::Bin => blob
-                    .map(Cow::Borrowed)
-                    .ok_or_else(|| "GLB has no BIN chunk".to_string()),
+                ::gltf::buffer::Source::Bin => {
+                    blob.map(Cow::Borrowed).ok_or_else(|| "GLB has no BIN chunk".to_string())
+                }
                 ::gltf::buffer::Source::Uri(uri) => read_uri(path, uri).map(Cow::Owned),
             };
             data.and_then(|d| {
                 if d.len() < b.length() {
-                    Err(format!(
-                        "buffer {} has {} bytes, declares {}",
-                        b.index(),
-                        d.len(),
-                        b.length()
-                    ))
+                    Err(format!("buffer {} has {} bytes, declares {}", b.index(), d.len(), b.length()))
                 } else {
                     Ok(d)
                 }
@@ -230,12 +248,8 @@ fn resolve_buffers<'a>(
 /// A column-major 4×4 affine transform in f64.
 type Mat4 = [[f64; 4]; 4];
 
-const IDENTITY: Mat4 = [
-    [1.0, 0.0, 0.0, 0.0],
-    [0.0, 1.0, 0.0, 0.0],
-    [0.0, 0.0, 1.0, 0.0],
-    [0.0, 0.0, 0.0, 1.0],
-];
+const IDENTITY: Mat4 =
+    [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
 
 fn mat_mul(a: &Mat4, b: &Mat4) -> Mat4 {
     let mut r = [[0.0; 4]; 4];
@@ -399,11 +413,7 @@ impl<'a, 'b> Loader<'a, 'b> {
                 textures: self.textures,
             }
         };
-        Ok(Mesh {
-            positions: self.positions,
-            triangles: self.triangles,
-            appearance,
-        })
+        Ok(Mesh { positions: self.positions, triangles: self.triangles, appearance })
     }
 
     /// Bytes of an accessor's elements: (data starting at element 0, stride, element size).
@@ -431,9 +441,7 @@ impl<'a, 'b> Loader<'a, 'b> {
         let need = if count == 0 {
             0
         } else {
-            offset
-                .saturating_add(stride.saturating_mul(count - 1))
-                .saturating_add(elem)
+            offset.saturating_add(stride.saturating_mul(count - 1)).saturating_add(elem)
         };
         if need > view_bytes.len() {
             return Err(self.err(format!(
@@ -460,10 +468,9 @@ impl<'a, 'b> Loader<'a, 'b> {
             _ => 0,
         };
         if dims != N {
-            return Err(self.err(format!(
-                "{what}: expected {N} components, accessor has {:?}",
-                acc.dimensions()
-            )));
+            return Err(
+                self.err(format!("{what}: expected {N} components, accessor has {:?}", acc.dimensions()))
+            );
         }
         let t = acc.data_type();
         let cs = component_size(t);
@@ -473,14 +480,11 @@ impl<'a, 'b> Loader<'a, 'b> {
         out.clear();
         match acc.view() {
             Some(view) => {
-                let (bytes, stride) =
-                    self.accessor_bytes(what, &view, acc.offset(), count, elem)?;
+                let (bytes, stride) = self.accessor_bytes(what, &view, acc.offset(), count, elem)?;
                 out.reserve(count);
                 for i in 0..count {
                     let e = &bytes[i * stride..];
-                    out.push(std::array::from_fn(|c| {
-                        read_component(&e[c * cs..], t, norm)
-                    }));
+                    out.push(std::array::from_fn(|c| read_component(&e[c * cs..], t, norm)));
                 }
             }
             None => {
@@ -488,9 +492,9 @@ impl<'a, 'b> Loader<'a, 'b> {
                 // so a lying header cannot exhaust memory.
                 let bytes: usize = self.doc.buffers().map(|b| b.length()).sum();
                 if count > bytes.saturating_add(1) {
-                    return Err(self.err(format!(
-                        "{what}: accessor without a buffer view claims {count} elements"
-                    )));
+                    return Err(
+                        self.err(format!("{what}: accessor without a buffer view claims {count} elements"))
+                    );
                 }
                 out.resize(count, [0.0; N]);
             }
@@ -542,10 +546,7 @@ impl<'a, 'b> Loader<'a, 'b> {
         world: &Mat4,
     ) -> Result<(), GeomError> {
         let mode = prim.mode();
-        if !matches!(
-            mode,
-            Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
-        ) {
+        if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
             return Ok(());
         }
         let what = format!("mesh {} primitive {}", mesh.index(), prim.index());
@@ -572,13 +573,20 @@ impl<'a, 'b> Loader<'a, 'b> {
         if base + nv > u32::MAX as usize {
             return Err(GeomError::invalid(self.path, "more than 2^32 vertices"));
         }
-        self.positions
-            .extend(pos.iter().map(|&p| transform_point(world, p)));
+        self.positions.extend(pos.iter().map(|&p| transform_point(world, p)));
         self.prim_pos = pos;
 
         // Material and UVs.
         let material = prim.material();
-        let tex_info = material.pbr_metallic_roughness().base_color_texture();
+        // Base colour: metallic-roughness, or the diffuse of the specular-glossiness
+        // extension when the material uses it (its metallic-roughness part is then absent).
+        let (factor, tex_info) = match material.pbr_specular_glossiness() {
+            Some(sg) => (sg.diffuse_factor(), sg.diffuse_texture()),
+            None => {
+                let mr = material.pbr_metallic_roughness();
+                (mr.base_color_factor(), mr.base_color_texture())
+            }
+        };
         let mut textured = false;
         let mut uv = std::mem::take(&mut self.prim_uv);
         uv.clear();
@@ -586,11 +594,7 @@ impl<'a, 'b> Loader<'a, 'b> {
         if let Some(info) = &tex_info {
             if let Some(acc) = prim.get(&::gltf::Semantic::TexCoords(info.tex_coord())) {
                 if acc.count() == nv {
-                    self.read_vec::<2>(
-                        &format!("{what} TEXCOORD_{}", info.tex_coord()),
-                        &acc,
-                        &mut uv,
-                    )?;
+                    self.read_vec::<2>(&format!("{what} TEXCOORD_{}", info.tex_coord()), &acc, &mut uv)?;
                     texture = self.texture(info.texture().source());
                     textured = texture.is_some();
                 }
@@ -600,11 +604,8 @@ impl<'a, 'b> Loader<'a, 'b> {
         let mat_id = match self.material_index.get(&key) {
             Some(&m) => m,
             None => {
-                let f = material.pbr_metallic_roughness().base_color_factor();
-                self.materials.push(Material {
-                    base_color: [f[0], f[1], f[2]],
-                    texture,
-                });
+                let f = factor;
+                self.materials.push(Material { base_color: [f[0], f[1], f[2]], texture });
                 let m = (self.materials.len() - 1) as u32;
                 self.material_index.insert(key, m);
                 m
@@ -617,29 +618,22 @@ impl<'a, 'b> Loader<'a, 'b> {
         let b = base as u32;
         match mode {
             Mode::Triangles => {
-                self.triangles
-                    .extend(idx.chunks_exact(3).map(|t| [t[0] + b, t[1] + b, t[2] + b]));
+                self.triangles.extend(idx.chunks_exact(3).map(|t| [t[0] + b, t[1] + b, t[2] + b]));
             }
             Mode::TriangleStrip => {
                 for i in 2..idx.len() {
-                    let (p, q) = if i % 2 == 0 {
-                        (idx[i - 2], idx[i - 1])
-                    } else {
-                        (idx[i - 1], idx[i - 2])
-                    };
+                    let (p, q) = if i % 2 == 0 { (idx[i - 2], idx[i - 1]) } else { (idx[i - 1], idx[i - 2]) };
                     self.triangles.push([p + b, q + b, idx[i] + b]);
                 }
             }
             _ => {
                 for i in 2..idx.len() {
-                    self.triangles
-                        .push([idx[0] + b, idx[i - 1] + b, idx[i] + b]);
+                    self.triangles.push([idx[0] + b, idx[i - 1] + b, idx[i] + b]);
                 }
             }
         }
         let added = self.triangles.len() - before;
-        self.face_material
-            .extend(std::iter::repeat_n(mat_id, added));
+        self.face_material.extend(std::iter::repeat_n(mat_id, added));
         if textured {
             let tris = &self.triangles[before..];
             self.corner_uvs.extend(tris.iter().map(|t| {
@@ -649,8 +643,7 @@ impl<'a, 'b> Loader<'a, 'b> {
                 })
             }));
         } else {
-            self.corner_uvs
-                .extend(std::iter::repeat_n([[0.0f32; 2]; 3], added));
+            self.corner_uvs.extend(std::iter::repeat_n([[0.0f32; 2]; 3], added));
         }
         self.prim_uv = uv;
         Ok(())
@@ -761,15 +754,9 @@ mod tests {
         );
         let m = load_mesh(&write(&dir, "a.glb", &glb(&doc, &bin))).unwrap();
         assert_eq!(m.triangles.len(), 2);
-        assert_eq!(
-            m.triangle(0),
-            [[10.0, 0.0, 0.0], [11.0, 0.0, 0.0], [10.0, 1.0, 0.0]]
-        );
+        assert_eq!(m.triangle(0), [[10.0, 0.0, 0.0], [11.0, 0.0, 0.0], [10.0, 1.0, 0.0]]);
         // Child of a scaled parent: p' = 2 (p + (0, 0, 1)).
-        assert_eq!(
-            m.triangle(1),
-            [[0.0, 0.0, 2.0], [2.0, 0.0, 2.0], [0.0, 2.0, 2.0]]
-        );
+        assert_eq!(m.triangle(1), [[0.0, 0.0, 2.0], [2.0, 0.0, 2.0], [0.0, 2.0, 2.0]]);
         assert_eq!(m.appearance, Appearance::None);
 
         // Without a default scene, every scene is loaded.
@@ -785,10 +772,7 @@ mod tests {
             json!([{"nodes": [0]}]),
         );
         let m = load_mesh(&write(&dir, "c.glb", &glb(&doc3, &bin3))).unwrap();
-        assert_eq!(
-            m.triangle(0),
-            [[0.0, 5.0, 0.0], [0.0, 6.0, 0.0], [-1.0, 5.0, 0.0]]
-        );
+        assert_eq!(m.triangle(0), [[0.0, 5.0, 0.0], [0.0, 6.0, 0.0], [-1.0, 5.0, 0.0]]);
     }
 
     #[test]
@@ -821,10 +805,7 @@ mod tests {
         let m = load_mesh(&write(&dir, "s.glb", &glb(&doc, &bin))).unwrap();
         // Strip (v0 v1 v2), (v2 v1 v3) [same winding as the spec's (v1 v3 v2)]; fan (v0 v1 v2),
         // (v0 v2 v3), offset by the 4 vertices of the first primitive. Points/lines skipped.
-        assert_eq!(
-            m.triangles,
-            vec![[0, 1, 2], [2, 1, 3], [4, 5, 6], [4, 6, 7]]
-        );
+        assert_eq!(m.triangles, vec![[0, 1, 2], [2, 1, 3], [4, 5, 6], [4, 6, 7]]);
         assert_eq!(m.positions.len(), 8);
     }
 
@@ -834,8 +815,7 @@ mod tests {
         // 2x1 PNG: left red, right green.
         let img = image::RgbImage::from_raw(2, 1, vec![255, 0, 0, 0, 255, 0]).unwrap();
         let mut png = Vec::new();
-        img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
-            .unwrap();
+        img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png).unwrap();
         let mut bin = f32s(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
         bin.extend(f32s(&[0.25, 0.5, 0.75, 0.5, 0.25, 0.5])); // UVs: left, right, left
         let img_off = bin.len();
@@ -870,20 +850,32 @@ mod tests {
         });
         let m = load_mesh(&write(&dir, "t.glb", &glb(&doc, &bin))).unwrap();
         assert_eq!(m.triangles.len(), 2);
-        let Appearance::Textured {
-            textures,
-            materials,
-            ..
-        } = &m.appearance
-        else {
-            panic!()
-        };
+        let Appearance::Textured { textures, materials, .. } = &m.appearance else { panic!() };
         assert_eq!(textures.len(), 1);
         assert_eq!((textures[0].width, textures[0].height), (2, 1));
         assert_eq!(materials.len(), 2);
         assert_eq!(m.color_at(0, [1.0, 0.0, 0.0]), Some([0.5, 0.0, 0.0]));
         assert_eq!(m.color_at(0, [0.0, 1.0, 0.0]), Some([0.0, 1.0, 0.0]));
         assert_eq!(m.color_at(1, [0.3, 0.3, 0.4]), Some([0.1, 0.2, 0.3]));
+
+        // Specular-glossiness material: its diffuse factor is the base colour.
+        let mut sg = doc.clone();
+        sg["materials"][1] = json!({"extensions": {"KHR_materials_pbrSpecularGlossiness":
+            {"diffuseFactor": [0.7, 0.6, 0.5, 1]}}});
+        sg["extensionsUsed"] = json!(["KHR_materials_pbrSpecularGlossiness"]);
+        let m = load_mesh(&write(&dir, "sg.glb", &glb(&sg, &bin))).unwrap();
+        assert_eq!(m.color_at(1, [1.0, 0.0, 0.0]), Some([0.7, 0.6, 0.5]));
+
+        // A texture whose image comes only from an extension (no `source`): loaded without
+        // textures, base colours kept.
+        let mut webp = doc.clone();
+        webp["textures"] = json!([{"extensions": {"EXT_texture_webp": {"source": 0}}}]);
+        webp["extensionsUsed"] = json!(["EXT_texture_webp"]);
+        let m = load_mesh(&write(&dir, "w.glb", &glb(&webp, &bin))).unwrap();
+        let Appearance::Textured { textures, .. } = &m.appearance else { panic!() };
+        assert!(textures.is_empty());
+        assert_eq!(m.color_at(0, [1.0, 0.0, 0.0]), Some([0.5, 1.0, 1.0]));
+        assert_eq!(m.color_at(1, [1.0, 0.0, 0.0]), Some([0.1, 0.2, 0.3]));
     }
 
     #[test]
@@ -914,10 +906,7 @@ mod tests {
         assert_eq!(m.triangle(0)[2], [0.0, 1.0, 0.0]);
         doc["buffers"][0]["uri"] = json!("missing.bin");
         let e = load_mesh(&write(&dir, "f.gltf", &serde_json::to_vec(&doc).unwrap())).unwrap_err();
-        assert!(
-            e.to_string().contains("f.gltf") && e.to_string().contains("missing.bin"),
-            "{e}"
-        );
+        assert!(e.to_string().contains("f.gltf") && e.to_string().contains("missing.bin"), "{e}");
     }
 
     #[test]
@@ -957,18 +946,8 @@ mod tests {
             ]
         });
         let m = load_mesh(&write(&dir, "q.glb", &glb(&doc, &bin))).unwrap();
-        assert_eq!(
-            m.triangle(0),
-            [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
-        );
-        assert_eq!(
-            m.triangle(1),
-            [
-                [1.0, 0.0, 3.0],
-                [0.0, 1.0, 3.0],
-                [0.0, 0.0, 3.0 + 32768.0 / 65535.0]
-            ]
-        );
+        assert_eq!(m.triangle(0), [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+        assert_eq!(m.triangle(1), [[1.0, 0.0, 3.0], [0.0, 1.0, 3.0], [0.0, 0.0, 3.0 + 32768.0 / 65535.0]]);
     }
 
     #[test]
@@ -994,12 +973,8 @@ mod tests {
         let mut nan_bin = bin.clone();
         nan_bin[12..16].copy_from_slice(&f32::NAN.to_le_bytes());
         check(&glb(&doc, &nan_bin), "non-finite");
-        let (doc_oob, bin_oob) =
-            triangle_doc([0, 1, 5], json!([{"mesh": 0}]), json!([{"nodes": [0]}]));
-        check(
-            &glb(&doc_oob, &bin_oob),
-            "index 5 out of range (3 vertices)",
-        );
+        let (doc_oob, bin_oob) = triangle_doc([0, 1, 5], json!([{"mesh": 0}]), json!([{"nodes": [0]}]));
+        check(&glb(&doc_oob, &bin_oob), "index 5 out of range (3 vertices)");
         let mut points = doc.clone();
         points["meshes"][0]["primitives"][0]["mode"] = json!(0);
         check(&glb(&points, &bin), "no triangles");

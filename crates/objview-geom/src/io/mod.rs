@@ -25,9 +25,7 @@ const EXPECTED: &str = "obj, ply, stl, off, gltf, glb";
 
 /// Lower-cased extension of `path`, if any.
 fn extension(path: &Path) -> Option<String> {
-    path.extension()
-        .and_then(|e| e.to_str())
-        .map(|e| e.to_ascii_lowercase())
+    path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase())
 }
 
 /// Whether `path` has one of the [`MESH_EXTENSIONS`] (case-insensitive). Does not look at the
@@ -42,10 +40,7 @@ pub fn is_mesh_file(path: &Path) -> bool {
 /// [`GeomError::Unsupported`].
 pub fn load_mesh(path: &Path) -> Result<Mesh, GeomError> {
     let Some(ext) = extension(path).filter(|e| MESH_EXTENSIONS.contains(&e.as_str())) else {
-        return Err(GeomError::Unsupported {
-            path: path.to_path_buf(),
-            expected: EXPECTED,
-        });
+        return Err(GeomError::Unsupported { path: path.to_path_buf(), expected: EXPECTED });
     };
     let mesh = catch_panic(path, || match ext.as_str() {
         "obj" => obj::load(path),
@@ -60,10 +55,7 @@ pub fn load_mesh(path: &Path) -> Result<Mesh, GeomError> {
 
 /// Runs `f`, turning a panic inside it (a bug in a parser fed garbage) into a parse error that
 /// names the file.
-pub(crate) fn catch_panic<T>(
-    path: &Path,
-    f: impl FnOnce() -> Result<T, GeomError>,
-) -> Result<T, GeomError> {
+pub(crate) fn catch_panic<T>(path: &Path, f: impl FnOnce() -> Result<T, GeomError>) -> Result<T, GeomError> {
     match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {
         Ok(r) => r,
         Err(payload) => {
@@ -72,10 +64,7 @@ pub(crate) fn catch_panic<T>(
                 .map(|s| s.to_string())
                 .or_else(|| payload.downcast_ref::<String>().cloned())
                 .unwrap_or_else(|| "unknown panic".to_string());
-            Err(GeomError::parse(
-                path,
-                format!("malformed file (parser failed: {msg})"),
-            ))
+            Err(GeomError::parse(path, format!("malformed file (parser failed: {msg})")))
         }
     }
 }
@@ -93,11 +82,7 @@ pub(crate) fn decode_texture(bytes: &[u8]) -> Option<crate::mesh::Texture> {
     if width == 0 || height == 0 {
         return None;
     }
-    let rgb = img
-        .into_raw()
-        .chunks_exact(3)
-        .map(|c| [c[0], c[1], c[2]])
-        .collect();
+    let rgb = img.into_raw().chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
     Some(crate::mesh::Texture { width, height, rgb })
 }
 
@@ -142,9 +127,7 @@ mod tests {
 
     #[test]
     fn panics_become_errors() {
-        let e = catch_panic::<()>(Path::new("p.glb"), || panic!("boom"))
-            .unwrap_err()
-            .to_string();
+        let e = catch_panic::<()>(Path::new("p.glb"), || panic!("boom")).unwrap_err().to_string();
         assert!(e.contains("p.glb") && e.contains("boom"), "{e}");
     }
 }

@@ -24,21 +24,16 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
     let file = std::fs::File::open(path).map_err(|e| GeomError::io(path, e))?;
     let obj_dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     let mtl_dir: RefCell<Option<PathBuf>> = RefCell::new(None);
-    let options = tobj::LoadOptions {
-        triangulate: true,
-        single_index: false,
-        ignore_points: true,
-        ignore_lines: true,
-    };
-    let (models, materials) =
-        tobj::load_obj_buf(&mut BufReader::new(file), &options, |mtl: &Path| {
-            let full = obj_dir.join(mtl);
-            if mtl_dir.borrow().is_none() {
-                *mtl_dir.borrow_mut() = full.parent().map(Path::to_path_buf);
-            }
-            tobj::load_mtl(&full)
-        })
-        .map_err(|e| GeomError::parse(path, format!("invalid OBJ: {e}")))?;
+    let options =
+        tobj::LoadOptions { triangulate: true, single_index: false, ignore_points: true, ignore_lines: true };
+    let (models, materials) = tobj::load_obj_buf(&mut BufReader::new(file), &options, |mtl: &Path| {
+        let full = obj_dir.join(mtl);
+        if mtl_dir.borrow().is_none() {
+            *mtl_dir.borrow_mut() = full.parent().map(Path::to_path_buf);
+        }
+        tobj::load_mtl(&full)
+    })
+    .map_err(|e| GeomError::parse(path, format!("invalid OBJ: {e}")))?;
     // A missing or malformed .mtl only means "no colour".
     let materials = materials.unwrap_or_default();
 
@@ -55,8 +50,8 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
         }
         positions.extend(m.positions.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
         let has_uv = !m.texcoords.is_empty() && m.texcoord_indices.len() == m.indices.len();
-        // `triangulate: true` makes every face a triangle; a leftover non-multiple of three
-        // (tobj keeps arities for non-triangulated meshes only) is handled as fans anyway.
+        // With `triangulate: true` tobj fan-triangulates and leaves `face_arities` empty; the
+        // general branch (polygons with arities) is kept so the loader never depends on it.
         if m.face_arities.is_empty() {
             for (k, t) in m.indices.chunks_exact(3).enumerate() {
                 triangles.push([t[0] + base as u32, t[1] + base as u32, t[2] + base as u32]);
@@ -84,18 +79,8 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
         }
     }
 
-    let appearance = appearance(
-        &materials,
-        mtl_dir.into_inner(),
-        path,
-        &tri_material,
-        &tri_uvs,
-    );
-    Ok(Mesh {
-        positions,
-        triangles,
-        appearance,
-    })
+    let appearance = appearance(&materials, mtl_dir.into_inner(), path, &tri_material, &tri_uvs);
+    Ok(Mesh { positions, triangles, appearance })
 }
 
 /// Corner UVs of the triangle whose first corner is at `first` in `m.indices`, with v flipped
@@ -146,11 +131,10 @@ fn appearance(
         mat_texture[i] = *entry;
     }
 
-    let any_used_texture = tri_material.iter().zip(tri_uvs).any(|(m, uv)| {
-        uv.is_some()
-            && m.and_then(|m| mat_texture.get(m).copied().flatten())
-                .is_some()
-    });
+    let any_used_texture = tri_material
+        .iter()
+        .zip(tri_uvs)
+        .any(|(m, uv)| uv.is_some() && m.and_then(|m| mat_texture.get(m).copied().flatten()).is_some());
     if any_used_texture {
         // Material table: (source material or none, textured?) -> index.
         let mut out_materials: Vec<Material> = Vec::new();
@@ -158,9 +142,7 @@ fn appearance(
         let mut face_material = Vec::with_capacity(tri_material.len());
         let mut corner = Vec::with_capacity(tri_material.len());
         for (&m, uv) in tri_material.iter().zip(tri_uvs) {
-            let tex = m
-                .and_then(|m| mat_texture.get(m).copied().flatten())
-                .filter(|_| uv.is_some());
+            let tex = m.and_then(|m| mat_texture.get(m).copied().flatten()).filter(|_| uv.is_some());
             let key = (m.filter(|&m| m < materials.len()), tex.is_some());
             let id = *index.entry(key).or_insert_with(|| {
                 out_materials.push(Material {
@@ -185,10 +167,7 @@ fn appearance(
     }
     if tri_material.iter().any(|&m| diffuse(m).is_some()) {
         return Appearance::FaceColors(
-            tri_material
-                .iter()
-                .map(|&m| diffuse(m).unwrap_or(DEFAULT_DIFFUSE))
-                .collect(),
+            tri_material.iter().map(|&m| diffuse(m).unwrap_or(DEFAULT_DIFFUSE)).collect(),
         );
     }
     Appearance::None
@@ -240,11 +219,7 @@ mod tests {
     #[test]
     fn quad_fan_exact_f64_and_kd_colours() {
         let dir = tempfile::tempdir().unwrap();
-        write(
-            &dir,
-            "m.mtl",
-            b"newmtl red\nKd 1 0 0\nnewmtl blue\nKd 0 0 0.5\n",
-        );
+        write(&dir, "m.mtl", b"newmtl red\nKd 1 0 0\nnewmtl blue\nKd 0 0 0.5\n");
         let obj = b"mtllib m.mtl\nv 0.123456789012345 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\n\
             usemtl red\nf 1 2 3 4\nusemtl blue\nf 1 2 5\n";
         let m = load_mesh(&write(&dir, "m.obj", obj)).unwrap();
@@ -276,17 +251,14 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         // 2x2 image: top-left red, top-right green, bottom-left blue, bottom-right white.
         let img =
-            image::RgbImage::from_raw(2, 2, vec![255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255])
-                .unwrap();
+            image::RgbImage::from_raw(2, 2, vec![255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255]).unwrap();
         img.save(dir.path().join("tex.png")).unwrap();
         write(&dir, "m.mtl", b"newmtl t\nKd 1 1 1\nmap_Kd tex.png\n");
         // vt (0.1, 0.9) is near the top-left in OBJ convention (v up) -> red.
         let obj = b"mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0.1 0.9\nvt 0.9 0.9\nvt 0.1 0.1\n\
             usemtl t\nf 1/1 2/2 3/3\n";
         let m = load_mesh(&write(&dir, "m.obj", obj)).unwrap();
-        let Appearance::Textured { textures, .. } = &m.appearance else {
-            panic!("{:?}", m.appearance)
-        };
+        let Appearance::Textured { textures, .. } = &m.appearance else { panic!("{:?}", m.appearance) };
         assert_eq!(textures.len(), 1);
         assert_eq!(m.color_at(0, [1.0, 0.0, 0.0]), Some([1.0, 0.0, 0.0]));
         assert_eq!(m.color_at(0, [0.0, 1.0, 0.0]), Some([0.0, 1.0, 0.0]));
@@ -308,19 +280,13 @@ mod tests {
         assert!(e.contains("no triangles"), "{e}");
         // Garbage (binary, not UTF-8).
         let e = err(&dir, &[0xff, 0xfe, 0x00, 0x93, 0x12, 0x80, 0x0a, 0xc3]);
-        assert!(
-            e.contains("invalid OBJ") || e.contains("no triangles"),
-            "{e}"
-        );
+        assert!(e.contains("invalid OBJ") || e.contains("no triangles"), "{e}");
         // NaN coordinate.
         let e = err(&dir, b"v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n");
         assert!(e.contains("non-finite"), "{e}");
         // Out-of-range index.
         let e = err(&dir, b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n");
-        assert!(
-            e.contains("out of bounds") || e.contains("references vertex"),
-            "{e}"
-        );
+        assert!(e.contains("out of bounds") || e.contains("references vertex"), "{e}");
         // No faces, only a line element.
         let e = err(&dir, b"v 0 0 0\nv 1 0 0\nl 1 2\n");
         assert!(e.contains("no triangles"), "{e}");

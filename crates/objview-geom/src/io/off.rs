@@ -14,12 +14,7 @@ use std::path::Path;
 
 /// Parses one number token, naming the line on failure.
 fn num<T: std::str::FromStr>(path: &Path, tok: &str, line: usize) -> Result<T, GeomError> {
-    tok.parse().map_err(|_| {
-        GeomError::parse(
-            path,
-            format!("invalid OFF: bad number '{tok}' on line {line}"),
-        )
-    })
+    tok.parse().map_err(|_| GeomError::parse(path, format!("invalid OFF: bad number '{tok}' on line {line}")))
 }
 
 /// Raw colour from the first 3 of 3 or 4 tokens; sets `real` when a token is written as a
@@ -45,8 +40,8 @@ fn scale_colors(c: &mut [[f32; 3]], real: bool) {
 /// Loads an OFF mesh. The caller validates the result.
 pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
     let bytes = super::read_bytes(path)?;
-    let text = std::str::from_utf8(&bytes)
-        .map_err(|_| GeomError::parse(path, "invalid OFF: not a text file"))?;
+    let text =
+        std::str::from_utf8(&bytes).map_err(|_| GeomError::parse(path, "invalid OFF: not a text file"))?;
     // Non-empty lines with comments removed, with their 1-based line numbers.
     let mut lines = text.lines().enumerate().filter_map(|(i, l)| {
         let l = l.split('#').next().unwrap_or("").trim();
@@ -83,10 +78,7 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
     let mut count_line = hline;
     if count_toks.is_empty() {
         let Some((l, s)) = lines.next() else {
-            return Err(GeomError::parse(
-                path,
-                "invalid OFF: missing vertex/face counts",
-            ));
+            return Err(GeomError::parse(path, "invalid OFF: missing vertex/face counts"));
         };
         count_line = l;
         count_toks = s.split_whitespace().collect();
@@ -100,10 +92,7 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
     let nv: usize = num(path, count_toks[0], count_line)?;
     let nf: usize = num(path, count_toks[1], count_line)?;
     if nv > u32::MAX as usize {
-        return Err(GeomError::invalid(
-            path,
-            format!("{nv} vertices exceed 2^32"),
-        ));
+        return Err(GeomError::invalid(path, format!("{nv} vertices exceed 2^32")));
     }
 
     // Cap pre-allocation by what the file can hold (a garbage count must not exhaust memory).
@@ -120,16 +109,9 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
         };
         let t: Vec<&str> = s.split_whitespace().collect();
         if t.len() < vtoks + if has_color { 3 } else { 0 } {
-            return Err(GeomError::parse(
-                path,
-                format!("invalid OFF: too few values on line {l}"),
-            ));
+            return Err(GeomError::parse(path, format!("invalid OFF: too few values on line {l}")));
         }
-        positions.push([
-            num(path, t[0], l)?,
-            num(path, t[1], l)?,
-            num(path, t[2], l)?,
-        ]);
+        positions.push([num(path, t[0], l)?, num(path, t[1], l)?, num(path, t[2], l)?]);
         if has_color {
             vcolors.push(color(path, &t[vtoks..], l, &mut vreal)?);
         }
@@ -186,11 +168,7 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
     } else {
         Appearance::None
     };
-    Ok(Mesh {
-        positions,
-        triangles,
-        appearance,
-    })
+    Ok(Mesh { positions, triangles, appearance })
 }
 
 #[cfg(test)]
@@ -238,39 +216,20 @@ mod tests {
     fn malformed_inputs_are_errors() {
         let dir = tempfile::tempdir().unwrap();
         let check = |text: &str, want: &str| {
-            let e = load_mesh(&write(&dir, "bad.off", text))
-                .unwrap_err()
-                .to_string();
+            let e = load_mesh(&write(&dir, "bad.off", text)).unwrap_err().to_string();
             assert!(e.contains("bad.off") && e.contains(want), "{e}");
         };
-        check(
-            "OFF\n3 1 0\n0 0 0\n1 0 0\n",
-            "declares 3 vertices, file ends after 2",
-        ); // truncated
-        check(
-            "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n",
-            "declares 1 faces, file ends after 0",
-        );
+        check("OFF\n3 1 0\n0 0 0\n1 0 0\n", "declares 3 vertices, file ends after 2"); // truncated
+        check("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n", "declares 1 faces, file ends after 0");
         check("PLY\n3 1 0\n", "should start with OFF"); // wrong magic
         std::fs::write(dir.path().join("bad.off"), [0xffu8, 0x00, 0x81]).unwrap();
-        let e = load_mesh(&dir.path().join("bad.off"))
-            .unwrap_err()
-            .to_string();
+        let e = load_mesh(&dir.path().join("bad.off")).unwrap_err().to_string();
         assert!(e.contains("not a text file"), "{e}"); // garbage
         check("OFF\n3 1 0\n0 0 0\nnan 0 0\n0 1 0\n3 0 1 2\n", "non-finite");
-        check(
-            "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n",
-            "references vertex 7",
-        );
-        check(
-            "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n",
-            "vertex index -1",
-        );
+        check("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n", "references vertex 7");
+        check("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n", "vertex index -1");
         check("OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n", "no triangles");
         check("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n4 0 1 2\n", "lists fewer");
-        check(
-            "OFF\n3 1 0\n0 0 0\n1 x 0\n0 1 0\n3 0 1 2\n",
-            "bad number 'x' on line 4",
-        );
+        check("OFF\n3 1 0\n0 0 0\n1 x 0\n0 1 0\n3 0 1 2\n", "bad number 'x' on line 4");
     }
 }

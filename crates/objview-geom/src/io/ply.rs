@@ -69,9 +69,7 @@ fn unsigned<T: Copy + TryInto<u32>>(v: &[T]) -> Option<Vec<u32>> {
 
 impl PropertyAccess for Face {
     fn new() -> Self {
-        Face {
-            indices: Some(Vec::new()),
-        }
+        Face { indices: Some(Vec::new()) }
     }
     fn set_property(&mut self, name: String, property: Property) {
         if name != "vertex_indices" && name != "vertex_index" {
@@ -117,16 +115,10 @@ pub(crate) fn read(path: &Path, with_faces: bool) -> Result<PlyData, GeomError> 
     let mut reader = BufReader::new(file);
     let perr = |what: &str, e: std::io::Error| {
         // ply-rs messages span several lines; keep the error on one line.
-        let msg = e
-            .to_string()
-            .split_whitespace()
-            .collect::<Vec<_>>()
-            .join(" ");
+        let msg = e.to_string().split_whitespace().collect::<Vec<_>>().join(" ");
         GeomError::parse(path, format!("invalid PLY {what}: {msg}"))
     };
-    let header: Header = Parser::<Skip>::new()
-        .read_header(&mut reader)
-        .map_err(|e| perr("header", e))?;
+    let header: Header = Parser::<Skip>::new().read_header(&mut reader).map_err(|e| perr("header", e))?;
     let Some(vdef) = header.elements.get("vertex") else {
         return Err(GeomError::parse(path, "invalid PLY: no 'vertex' element"));
     };
@@ -145,11 +137,7 @@ pub(crate) fn read(path: &Path, with_faces: bool) -> Result<PlyData, GeomError> 
         && has_property(vdef, &["green", "g", "diffuse_green"])
         && has_property(vdef, &["blue", "b", "diffuse_blue"]);
 
-    let mut data = PlyData {
-        positions: Vec::new(),
-        colors: None,
-        faces: Vec::new(),
-    };
+    let mut data = PlyData { positions: Vec::new(), colors: None, faces: Vec::new() };
     for (name, def) in &header.elements {
         match name.as_str() {
             "vertex" => {
@@ -209,11 +197,7 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
         Some(c) => Appearance::VertexColors(c),
         None => Appearance::None,
     };
-    Ok(Mesh {
-        positions: data.positions,
-        triangles,
-        appearance,
-    })
+    Ok(Mesh { positions: data.positions, triangles, appearance })
 }
 
 #[cfg(test)]
@@ -231,11 +215,7 @@ mod tests {
     /// Binary PLY: `n` double vertices (with an extra float property in between) and
     /// int-indexed faces, in the given endianness.
     fn binary(le: bool, verts: &[[f64; 3]], faces: &[Vec<i32>]) -> Vec<u8> {
-        let fmt = if le {
-            "binary_little_endian"
-        } else {
-            "binary_big_endian"
-        };
+        let fmt = if le { "binary_little_endian" } else { "binary_big_endian" };
         let mut b = format!(
             "ply\nformat {fmt} 1.0\ncomment test\nelement vertex {}\nproperty double x\n\
              property float quality\nproperty double y\nproperty double z\nelement face {}\n\
@@ -267,12 +247,7 @@ mod tests {
         b
     }
 
-    const SQUARE: [[f64; 3]; 4] = [
-        [0.0, 0.0, 0.0],
-        [1.0, 0.0, 0.0],
-        [1.0, 1.0, 0.0],
-        [0.0, 1.0, 0.25],
-    ];
+    const SQUARE: [[f64; 3]; 4] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.25]];
 
     #[test]
     fn ascii_with_colours_and_quad() {
@@ -284,9 +259,7 @@ mod tests {
         let m = load_mesh(&write(&dir, "a.ply", text.as_bytes())).unwrap();
         assert_eq!(m.positions, SQUARE.to_vec());
         assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3]]);
-        let Appearance::VertexColors(c) = &m.appearance else {
-            panic!()
-        };
+        let Appearance::VertexColors(c) = &m.appearance else { panic!() };
         assert_eq!(c[0], [1.0, 0.0, 0.0]);
         assert_eq!(c[3], [0.2, 0.4, 0.6]);
     }
@@ -309,10 +282,7 @@ mod tests {
         let check = |bytes: &[u8], want: &[&str]| {
             let p = write(&dir, "bad.ply", bytes);
             let e = load_mesh(&p).unwrap_err().to_string();
-            assert!(
-                e.contains("bad.ply") && want.iter().any(|w| e.contains(w)),
-                "{e}"
-            );
+            assert!(e.contains("bad.ply") && want.iter().any(|w| e.contains(w)), "{e}");
             assert!(!e.contains('\n'), "one-line error: {e}");
         };
         let good = binary(true, &SQUARE, &[vec![0, 1, 2]]);
@@ -322,15 +292,9 @@ mod tests {
         let mut nan = SQUARE;
         nan[1][2] = f64::NAN;
         check(&binary(true, &nan, &[vec![0, 1, 2]]), &["non-finite"]);
-        check(
-            &binary(true, &SQUARE, &[vec![0, 1, 4]]),
-            &["references vertex 4"],
-        );
+        check(&binary(true, &SQUARE, &[vec![0, 1, 4]]), &["references vertex 4"]);
         check(&binary(true, &SQUARE, &[vec![0, -1, 2]]), &["negative"]);
         check(&binary(true, &SQUARE, &[]), &["no triangles"]);
-        check(
-            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\n0\n",
-            &["'y'"],
-        );
+        check(b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\n0\n", &["'y'"]);
     }
 }

@@ -16,10 +16,7 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
         if bytes.len() < 84 {
             return Err(GeomError::parse(
                 path,
-                format!(
-                    "invalid STL: {} bytes, shorter than the 84-byte binary header",
-                    bytes.len()
-                ),
+                format!("invalid STL: {} bytes, shorter than the 84-byte binary header", bytes.len()),
             ));
         }
         let n = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as u64;
@@ -43,11 +40,7 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
     }
     let mesh = stl_io::read_stl(&mut Cursor::new(&bytes))
         .map_err(|e| GeomError::parse(path, format!("invalid STL: {e}")))?;
-    let positions = mesh
-        .vertices
-        .iter()
-        .map(|v| [v[0] as f64, v[1] as f64, v[2] as f64])
-        .collect();
+    let positions = mesh.vertices.iter().map(|v| [v[0] as f64, v[1] as f64, v[2] as f64]).collect();
     let mut triangles = Vec::with_capacity(mesh.faces.len());
     for f in &mesh.faces {
         let [a, b, c] = f.vertices;
@@ -118,10 +111,7 @@ mod tests {
             let m = load_mesh(p).unwrap();
             assert_eq!(m.positions.len(), 4, "{}", p.display());
             assert_eq!(m.triangles.len(), 2);
-            assert_eq!(
-                m.triangle(1),
-                [[1.0, 0.0, 0.0], [1.0, 1.0, 0.5], [0.0, 1.0, 0.0]]
-            );
+            assert_eq!(m.triangle(1), [[1.0, 0.0, 0.0], [1.0, 1.0, 0.5], [0.0, 1.0, 0.0]]);
             assert!((m.surface_area() - (0.5 + 0.5 * 1.5f64.sqrt())).abs() < 1e-12);
         }
     }
@@ -137,10 +127,7 @@ mod tests {
         let good = binary(b"x", &TWO);
         check(&good[..good.len() - 10], "truncated"); // truncated binary
         check(b"garbage", "shorter than the 84-byte"); // garbage / wrong magic
-        check(
-            b"solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 zz\n",
-            "invalid STL",
-        );
+        check(b"solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 zz\n", "invalid STL");
         let mut nan = TWO;
         nan[0][1][0] = f32::NAN;
         check(&binary(b"x", &nan), "non-finite");

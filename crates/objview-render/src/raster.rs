@@ -94,6 +94,8 @@ struct Setup<'a> {
     /// Largest |px|, |py| over the image.
     pxmax: f32,
     pymax: f32,
+    /// Whether the AVX2 build may be used (when the CPU has it).
+    simd: bool,
 }
 
 /// Reusable buffers of the rasterizer. Create once, render many views (and meshes).
@@ -108,6 +110,8 @@ pub struct Renderer {
     px64: Vec<f64>,
     py64: Vec<f64>,
     tables_for: Option<crate::Intrinsics>,
+    /// Never use the AVX2 build (tests compare the two).
+    portable: bool,
 }
 
 impl Renderer {
@@ -134,6 +138,12 @@ impl Renderer {
         // Below a few thousand triangles per thread the extra buffers cost more than they save.
         let parts = threads.min(mesh.triangles.len() / 4096).max(1);
         self.render_parts(mesh, camera, frame, parts);
+    }
+
+    /// Forces the portable (non-AVX2) code path; for tests and comparisons. The output is
+    /// identical either way.
+    pub fn set_portable(&mut self, portable: bool) {
+        self.portable = portable;
     }
 
     fn render_parts(&mut self, mesh: &Mesh, camera: &Camera, frame: &mut Frame, parts: usize) {
@@ -229,6 +239,7 @@ impl Renderer {
             py64: &self.py64,
             pxmax: self.px[..self.px64.len()].iter().fold(0.0, |m, x| m.max(x.abs())),
             pymax: self.py.iter().fold(0.0, |m, x| m.max(x.abs())),
+            simd: !self.portable,
         }
     }
 }
@@ -333,7 +344,7 @@ struct Batch {
 fn raster_range(s: &Setup, lo: usize, hi: usize, zbuf: &mut [u64]) {
     #[cfg(target_arch = "x86_64")]
     {
-        if std::is_x86_feature_detected!("avx2") {
+        if s.simd && std::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports the enabled features (checked just above).
             unsafe { raster_range_avx2(s, lo, hi, zbuf) };
             return;
@@ -399,7 +410,7 @@ unsafe fn cover_avx2(k: &RowConst, px: &[f32; LANES], w: &mut [f32; LANES]) -> u
     _mm256_storeu_ps(w.as_mut_ptr(), wv);
     let m3 = _mm256_cmp_ps::<_CMP_GE_OQ>(wv, _mm256_set1_ps(k.wmin));
     let m4 = _mm256_cmp_ps::<_CMP_LE_OQ>(wv, _mm256_set1_ps(k.wmax));
-    let m = _mm256_and_ps(_mm256_and_ps(_mm256_and_ps(m0, m1), _mm256_and_ps(m2, m3)), m4);
+    let m = _mm256_and_ps(_mm256_and_ps(m0, m1), _mm256_and_ps(m2, m3)); let _ = m4;
     _mm256_movemask_ps(m) as u32
 }
 

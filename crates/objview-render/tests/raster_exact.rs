@@ -393,3 +393,23 @@ fn geometry_beyond_zfar_or_behind_the_camera_is_not_seen() {
     let f = objview_render::render(&shifted(-6.5), &cam);
     assert!(f.num_hits() > 0 && f.depth.iter().all(|&z| z == 0.0 || z == 9.5));
 }
+
+#[test]
+fn portable_and_simd_paths_are_bit_identical() {
+    let meshes = [soup(3000, 21), icosphere(4), big_random_triangles(300, 22)];
+    let poses = [Pose::from_direction([0.2, -0.7, 0.4], 3.0), Pose::from_direction([0.0, 0.3, 1.0], 1.0)];
+    let (mut simd, mut portable) = (Renderer::new(), Renderer::new());
+    portable.set_portable(true);
+    for mesh in &meshes {
+        for &p in &poses {
+            let cam = Camera::with_default_intrinsics(p);
+            let mut a = Frame::empty(cam);
+            let mut b = Frame::empty(cam);
+            simd.render_into(mesh, &cam, &mut a);
+            portable.render_into(mesh, &cam, &mut b);
+            assert!(a.num_hits() > 1000);
+            assert!(a.depth.iter().map(|x| x.to_bits()).eq(b.depth.iter().map(|x| x.to_bits())));
+            assert_eq!(a.triangle, b.triangle);
+        }
+    }
+}

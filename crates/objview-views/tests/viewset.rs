@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use objview_views::tammes::best_known_deg;
+use objview_views::tammes::{best_known_deg, file_header, DEFAULT_SEED};
 use objview_views::viewset::min_pairwise_angle_deg;
 use objview_views::{start_pose, ViewSet, ViewsError, START_DIRECTION};
 
@@ -147,7 +147,9 @@ fn every_grid_size_is_built_in_and_within_half_percent_of_best_known() {
         let a = vs.min_angle_deg().unwrap();
         let best = best_known_deg(n).unwrap_or_else(|| panic!("no best-known angle for {n}"));
         assert!(a >= 0.995 * best, "{name}: min angle {a} < 0.995 * best-known {best}");
-        assert!(a <= best * (1.0 + 1e-6), "{name}: min angle {a} beats best-known {best}?");
+        // Sanity bound against a broken angle computation; tammes-144 does exceed the table's
+        // value by 0.0026% (17.5928469 vs 17.5923906, checked independently).
+        assert!(a <= best * 1.0001, "{name}: min angle {a} far above best-known {best}");
     }
 }
 
@@ -156,13 +158,17 @@ fn generated_files_have_headers_matching_their_content() {
     for &n in GRID.iter().filter(|&&n| n != 128 && n != 360) {
         let path = data_dir().join(format!("tammes-{n}.txt"));
         let text = std::fs::read_to_string(&path).unwrap();
-        assert!(text.contains("generator: objview-tammes 1"), "{}", path.display());
-        assert!(text.contains("seed 20260523"), "{}", path.display());
-        let line = text.lines().find(|l| l.starts_with("# min_angle_deg: ")).unwrap();
-        let stated: f64 = line["# min_angle_deg: ".len()..].trim().parse().unwrap();
-        let actual = ViewSet::parse("x", &text).unwrap().min_angle_deg().unwrap();
-        assert!((stated - actual).abs() < 1e-8, "tammes-{n}: header {stated} vs {actual}");
-        assert!(text.contains("# best_known_deg: "), "tammes-{n}");
+        let vs = ViewSet::parse("x", &text).unwrap();
+        let header: Vec<String> = text
+            .lines()
+            .take_while(|l| l.starts_with('#'))
+            .map(|l| l.trim_start_matches("# ").to_string())
+            .collect();
+        // The header is exactly what the generator writes for this content.
+        assert_eq!(header, file_header(&vs, DEFAULT_SEED), "{}", path.display());
+        assert!(header[1].contains("generator: objview-tammes 1") && header[1].contains("seed 20260523"));
+        let stated: f64 = header[2]["min_angle_deg: ".len()..].trim().parse().unwrap();
+        assert!((stated - vs.min_angle_deg().unwrap()).abs() < 1e-8, "tammes-{n}");
     }
 }
 

@@ -40,7 +40,21 @@ enum Command {
 }
 
 fn main() {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            use clap::error::ErrorKind;
+            if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion)
+                || matches!(e.kind(), ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand)
+            {
+                e.exit();
+            }
+            // One line: clap's first line ("error: ..."), without the usage trailer.
+            let text = e.to_string();
+            eprintln!("{}", text.lines().next().unwrap_or("error: invalid arguments"));
+            std::process::exit(2);
+        }
+    };
     let result = match cli.command {
         Command::Render(a) => render::run(a),
         Command::Viewset(c) => viewset::run(c),
@@ -50,9 +64,34 @@ fn main() {
         Command::Demo(a) => demo::run(a),
     };
     if let Err(e) = result {
-        // One line: the chain of causes joined, innermost last.
-        let msg: Vec<String> = e.chain().map(|c| c.to_string()).collect();
-        eprintln!("error: {}", msg.join(": "));
+        eprintln!("error: {}", one_line(&e));
         std::process::exit(1);
+    }
+}
+
+/// The chain of causes joined by ": " on one line, innermost last; a cause whose text the
+/// message so far already ends with (errors that print their source) is not repeated.
+fn one_line(e: &anyhow::Error) -> String {
+    let mut msg = String::new();
+    for cause in e.chain() {
+        let c = cause.to_string();
+        if msg.ends_with(&c) {
+            continue;
+        }
+        if !msg.is_empty() {
+            msg.push_str(": ");
+        }
+        msg.push_str(&c);
+    }
+    msg.replace('\n', " ")
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn one_line_drops_repeated_causes() {
+        let io = std::io::Error::new(std::io::ErrorKind::NotFound, "gone");
+        let e = anyhow::Error::new(objview_geom::GeomError::io("a.obj", io)).context("loading");
+        assert_eq!(super::one_line(&e), "loading: a.obj: gone");
     }
 }

@@ -38,6 +38,9 @@ pub fn parse_pose(s: &str) -> Result<Pose, String> {
 
 pub fn run(a: Args) -> Result<()> {
     let (mesh, _) = load_normalized(&a.mesh, a.normalize)?;
+    for out in [Some(&a.depth), a.points.as_ref(), a.preview.as_ref(), a.rgb.as_ref()].into_iter().flatten() {
+        crate::common::create_parent(out)?;
+    }
     let cam = Camera::new(a.pose, Intrinsics::default());
     let frame = objview_render::render(&mesh, &cam);
     let (w, h) = (frame.width() as usize, frame.height() as usize);

@@ -29,7 +29,7 @@ pub struct Args {
     #[arg(long, default_value = "inverse")]
     pub mode: VisibilityMode,
     /// Voxel size r (normalized units).
-    #[arg(long, default_value_t = DEFAULT_RESOLUTION)]
+    #[arg(long, default_value_t = DEFAULT_RESOLUTION, allow_hyphen_values = true)]
     pub resolution: f64,
     /// Output JSON.
     #[arg(long)]

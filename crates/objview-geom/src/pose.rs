@@ -55,7 +55,11 @@ impl Pose {
         for (i, p) in parts.iter().enumerate() {
             a[i] = p.parse::<f64>().map_err(|_| format!("pose number {} is not a number: {p:?}", i + 1))?;
         }
-        Pose::from_array(a).ok_or_else(|| "pose numbers must be finite".to_string())
+        let p = Pose::from_array(a).ok_or_else(|| "pose numbers must be finite".to_string())?;
+        if p.center == p.look_at {
+            return Err("the camera centre equals the look-at point: the pose has no viewing direction".into());
+        }
+        Ok(p)
     }
 
     /// Distance of the camera centre from the origin.
@@ -76,6 +80,7 @@ mod tests {
         assert!(Pose::parse("1,2,3").unwrap_err().contains("7 numbers"));
         assert!(Pose::parse("1,2,3,4,5,6,x").unwrap_err().contains("number 7"));
         assert!(Pose::parse("1,2,3,4,5,6,NaN").is_err());
+        assert!(Pose::parse("1,1,1,1,1,1,0").unwrap_err().contains("no viewing direction"));
         let d = Pose::from_direction([0.0, 0.0, 2.0], VIEW_RADIUS);
         assert_eq!(d.center, [0.0, 0.0, 3.0]);
         assert!((d.radius() - 3.0).abs() < 1e-15);

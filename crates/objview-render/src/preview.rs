@@ -16,13 +16,8 @@ pub enum PreviewError {
 }
 
 /// Viridis (matplotlib) at t = 0, ¼, ½, ¾, 1; linearly interpolated in between.
-const VIRIDIS: [[f64; 3]; 5] = [
-    [68.0, 1.0, 84.0],
-    [59.0, 82.0, 139.0],
-    [33.0, 145.0, 140.0],
-    [94.0, 201.0, 98.0],
-    [253.0, 231.0, 37.0],
-];
+const VIRIDIS: [[f64; 3]; 5] =
+    [[68.0, 1.0, 84.0], [59.0, 82.0, 139.0], [33.0, 145.0, 140.0], [94.0, 201.0, 98.0], [253.0, 231.0, 37.0]];
 
 /// Viridis colour of `t` in [0, 1] (clamped): 0 = dark purple, 1 = yellow.
 pub fn viridis(t: f64) -> [u8; 3] {
@@ -37,7 +32,8 @@ pub fn viridis(t: f64) -> [u8; 3] {
 /// all have one depth is yellow where hit.
 pub fn depth_preview(frame: &Frame) -> RgbImage {
     let (w, h) = (frame.width(), frame.height());
-    let hits = || frame.depth.iter().zip(&frame.triangle).filter(|(_, &t)| t != NO_HIT).map(|(&z, _)| z as f64);
+    let hits =
+        || frame.depth.iter().zip(&frame.triangle).filter(|(_, &t)| t != NO_HIT).map(|(&z, _)| z as f64);
     let lo = hits().fold(f64::INFINITY, f64::min);
     let hi = hits().fold(f64::NEG_INFINITY, f64::max);
     let span = if hi > lo { hi - lo } else { 1.0 };
@@ -60,7 +56,12 @@ pub fn save_png(img: &RgbImage, path: impl AsRef<Path>) -> Result<(), PreviewErr
 
 /// Writes a row-major `width × height` RGB buffer (e.g. from [`crate::rgb::render_rgb`]) as a
 /// PNG to `path`.
-pub fn save_rgb_png(width: u32, height: u32, rgb: &[[u8; 3]], path: impl AsRef<Path>) -> Result<(), PreviewError> {
+pub fn save_rgb_png(
+    width: u32,
+    height: u32,
+    rgb: &[[u8; 3]],
+    path: impl AsRef<Path>,
+) -> Result<(), PreviewError> {
     let path = path.as_ref();
     if rgb.len() != width as usize * height as usize {
         return Err(PreviewError::Size { path: path.to_path_buf(), width, height, len: rgb.len() });
@@ -92,7 +93,8 @@ mod tests {
             vec![[0.3, -0.5, -0.5], [-0.3, 0.5, -0.5], [-0.3, 0.5, 0.5], [0.3, -0.5, 0.5]],
             vec![[0, 1, 2], [0, 2, 3]],
         );
-        let cam = Camera::new(Pose::from_direction([1.0, 0.0, 0.0], 3.0), Intrinsics::from_fov(64, 64, 45.0, 45.0));
+        let cam =
+            Camera::new(Pose::from_direction([1.0, 0.0, 0.0], 3.0), Intrinsics::from_fov(64, 64, 45.0, 45.0));
         let f = crate::render(&mesh, &cam);
         let img = depth_preview(&f);
         assert_eq!(img.get_pixel(0, 0).0, [0, 0, 0]);

@@ -1,5 +1,7 @@
 //! The fast depth renderer: a z-buffer rasterizer whose output equals first-hit ray casting
-//! through every pixel centre (SPEC §2), i.e. the brute-force [`crate::reference`] oracle.
+//! through every pixel centre (SPEC §2), i.e. the brute-force [`crate::reference`] oracle,
+//! up to f32 rounding (tests: zero disagreeing pixels on random soups, closed meshes, near
+//! and polar poses; relative depth difference < 1e-6).
 //!
 //! Why it is exact rather than "a GPU-style approximation":
 //!
@@ -8,40 +10,47 @@
 //!   the pixel-centre ray r = ((u+½−cx)/fx, (v+½−cy)/fy, 1). Writing the hit point as
 //!   t·r = αa + βb + γc gives e_ab = γ·D/t, e_bc = α·D/t, e_ca = β·D/t with D = [a, b, c], so
 //!   "all three edge functions have the sign of D" is exactly "the ray hits the triangle at
-//!   t > 0". No projection of vertices and no near-plane clipping of the triangle is needed
-//!   for coverage: vertices behind the camera (common at camera radius 1) are handled
-//!   by the same formula. The tie rule is inclusive (≥ 0), as in the reference.
-//! - **Depth is the ray–plane intersection** z = D / (n·r) with n = (b−a)×(c−a) (r has z = 1,
-//!   so the ray parameter is the camera-frame z), and the znear ≤ z ≤ zfar test is applied
-//!   per pixel, exactly like the reference.
-//! - **Watertight.** The edge coefficients of a shared edge are computed in f64 from the
-//!   same camera-frame vertices as a × b in one triangle and b × a in the other, which are
-//!   exact negations in IEEE arithmetic; they are rounded to f32 (also negation-symmetric)
-//!   and evaluated at a pixel by one fixed formula depending only on the coefficients and the
-//!   pixel. So at every pixel centre one of the two triangles sees e ≥ 0: no cracks. Double
-//!   coverage on an edge is resolved by the z-buffer like the reference's nearest-hit rule.
-//! - **Deterministic.** The z-buffer holds `(depth bits << 32) | triangle id` as one u64 and
-//!   keeps the minimum: nearest depth, then lowest triangle id (the reference's tie rule).
-//!   A minimum does not depend on the order triangles are drawn in, so the parallel renderer
-//!   (triangle ranges on per-thread buffers merged by minimum) gives the same bytes for any
-//!   thread count.
+//!   t > 0". No projection and no near-plane clipping of the triangle is needed for
+//!   coverage: corners behind the camera (common at camera radius 1) are handled by the
+//!   same formula. The tie rule is inclusive (≥ 0), as in the reference.
+//! - **Depth is the ray–plane intersection** z = D / (n·r), n = (b−a)×(c−a) (r has z = 1, so
+//!   the ray parameter is the camera-frame z); the znear ≤ z ≤ zfar test is applied per
+//!   pixel, like the reference. The z-buffer stores the inverse depth w = (n·r)·(1/D), which
+//!   needs no division per pixel; the depth written to the frame is 1/w.
+//! - **Watertight.** The edge coefficients of edge a → b are computed as (a+b)×(b−a)
+//!   (= 2 a×b, well conditioned for short edges far away), which is exactly antisymmetric
+//!   in IEEE arithmetic: the neighbour computes (b+a)×(a−b), the exact negation. They are
+//!   evaluated at a pixel by one fixed formula of the coefficients and the pixel, so at every
+//!   pixel centre one of the two triangles sees e ≥ 0: no cracks, also along seams of
+//!   duplicated vertices (nothing depends on vertex indices). Double coverage on an edge is
+//!   resolved by the z-buffer like the reference's nearest-hit rule.
+//! - **Deterministic.** A pixel is replaced only by a strictly nearer hit and triangles are
+//!   drawn in increasing id order, so equal depths keep the lowest id (the reference's rule);
+//!   the parallel renderer draws contiguous triangle ranges into per-thread buffers merged
+//!   in range order with the same rule, which gives the same bytes for any thread count. The
+//!   AVX2 build and the portable build perform the same IEEE operations (Rust never fuses
+//!   a·b + c on its own), so they agree bit for bit too.
 //!
-//! Precision: vertices are transformed and triangle constants are set up in f64; the per-pixel
-//! edge and depth evaluation runs in f32 (coverage error ~1e-4 px, depth relative error
-//! ~2e-7 / cos θ). Triangles seen at a grazing angle (cos θ < [`GRAZING_COS`] somewhere on
-//! them) evaluate their depth in f64 instead, so depth stays within ~1e-6 relative of the
-//! reference everywhere.
+//! Precision: vertices are transformed in f64 and stored as f32; triangle set-up and the
+//! per-pixel evaluation run in f32 (coverage error ~1e-4 px, depth relative error a few
+//! 1e-7). Triangles whose f32 depth error bound exceeds ~4e-6 (grazing views, including most
+//! triangles that cross the near plane) take a path with f32 coverage (the shared formula,
+//! to stay watertight) and f64 depth and depth-range test.
 //!
-//! Screen bounding boxes only limit which pixels are tested; they come from the f32
-//! projected vertices (or, for triangles crossing the near plane, from the f64 triangle
+//! Work layout, per frame: vertex transform ([`Renderer`] buffers), triangle set-up in
+//! batches of 8 (AVX2 gathers, branch-free vectorized arithmetic: depth-range rejection,
+//! screen bounding box, edge and plane constants), then per surviving triangle its bounding
+//! box rows, 8 pixels at a time (coverage, inverse depth, z-test and masked stores,
+//! branch-free). Bounding boxes only limit which pixels are tested; they come from the f32
+//! projected vertices (or, for triangles reaching behind znear/2, from the f64 triangle
 //! clipped to z ≥ znear) with a small safety margin.
 
 use crate::{Camera, Frame, NO_HIT};
 use objview_geom::Mesh;
 use rayon::prelude::*;
 
-/// Z-buffer value of a pixel nothing has been drawn to.
-const EMPTY: u64 = u64::MAX;
+/// Depth key of a pixel nothing has been drawn to.
+const EMPTY: u32 = u32::MAX;
 
 /// Safety margin (pixels) added around each screen bounding box, larger than the f32 error
 /// of the projected vertices and of the coverage test.
@@ -57,18 +66,17 @@ const LANES: usize = 8;
 /// Pixel blocks of the parallel merge/resolve passes.
 const BLOCK: usize = 16384;
 
-/// A packed z-buffer entry from the inverse depth w = 1/z (positive, finite, nonzero) and
-/// the triangle id: nearest depth (largest w) first, then lowest triangle id. Positive f32
-/// bit patterns order like the values, so `u32::MAX − bits(w)` orders like z.
+/// Depth key of an inverse depth w = 1/z (positive, finite, nonzero): positive f32 bit
+/// patterns order like the values, so `u32::MAX − bits(w)` orders like z (nearest smallest).
 #[inline(always)]
-fn pack(w: f32, t: u32) -> u64 {
-    (((u32::MAX - w.to_bits()) as u64) << 32) | t as u64
+fn depth_key(w: f32) -> u32 {
+    u32::MAX - w.to_bits()
 }
 
-/// Depth of a packed z-buffer entry, 0 for [`EMPTY`].
+/// Depth of a depth key, 0 for [`EMPTY`].
 #[inline(always)]
-fn unpack_depth(key: u64) -> f32 {
-    let w = f32::from_bits(u32::MAX - (key >> 32) as u32);
+fn key_depth(key: u32) -> f32 {
+    let w = f32::from_bits(u32::MAX - key);
     if key == EMPTY {
         0.0
     } else {
@@ -76,9 +84,17 @@ fn unpack_depth(key: u64) -> f32 {
     }
 }
 
-/// A vertex in the camera frame: `[x, y, z, u, v, 0, 0, 0]` (f32), with the projected image
-/// coordinates (u, v) valid where z > znear / 2. 32 bytes: one aligned load per corner.
-type Vert = [f32; 8];
+/// A z-buffer: per pixel the depth key of the nearest hit so far and its triangle id (valid
+/// where the key is not [`EMPTY`]). Triangles are drawn in increasing id order and a pixel
+/// is only replaced by a strictly nearer hit, so ties keep the lowest id.
+#[derive(Default)]
+struct ZBuf {
+    key: Vec<u32>,
+    id: Vec<u32>,
+}
+
+/// A vertex in the camera frame: `[x, y, z, 0]` (f32; 16 bytes, one aligned load).
+type Vert = [f32; 4];
 
 /// Per-camera, per-mesh data shared read-only by all threads of one render.
 struct Setup<'a> {
@@ -104,7 +120,7 @@ pub struct Renderer {
     verts: Vec<Vert>,
     /// One packed z-buffer per thread (the first is the single-thread buffer). Invariant:
     /// every buffer is all [`EMPTY`] between renders (resolving and merging reset them).
-    zbufs: Vec<Vec<u64>>,
+    zbufs: Vec<ZBuf>,
     px: Vec<f32>,
     py: Vec<f32>,
     px64: Vec<f64>,
@@ -152,13 +168,15 @@ impl Renderer {
         let n = camera.intrinsics.num_pixels();
         let mut bufs = std::mem::take(&mut self.zbufs);
         if bufs.len() < parts {
-            bufs.resize_with(parts, Vec::new);
+            bufs.resize_with(parts, ZBuf::default);
         }
         for b in &mut bufs[..parts] {
-            if b.len() != n {
-                b.clear();
-                b.resize(n, EMPTY);
+            // LANES pixels of padding: rows are read LANES pixels at a time.
+            if b.key.len() != n + LANES {
+                b.key.clear();
+                b.key.resize(n + LANES, EMPTY);
             }
+            b.id.resize(n + LANES, NO_HIT);
         }
         let ntri = mesh.triangles.len();
         {
@@ -167,19 +185,31 @@ impl Renderer {
                 bufs[..parts].par_iter_mut().enumerate().for_each(|(k, buf)| {
                     raster_range(&setup, ntri * k / parts, ntri * (k + 1) / parts, buf);
                 });
-                // Merge into buffer 0 (resetting the others), in parallel over pixel blocks.
+                // Merge into buffer 0 in triangle-range order (resetting the others), in
+                // parallel over pixel blocks: strictly nearer wins, so ties keep the lower id.
+                type Block<'b> = (&'b mut [u32], &'b mut [u32]);
                 let (first, rest) = bufs.split_at_mut(1);
-                let mut rest: Vec<std::slice::ChunksMut<u64>> =
-                    rest[..parts - 1].iter_mut().map(|b| b.chunks_mut(BLOCK)).collect();
-                let blocks: Vec<(&mut [u64], Vec<&mut [u64]>)> = first[0]
+                let mut rest: Vec<_> = rest[..parts - 1]
+                    .iter_mut()
+                    .map(|b| b.key.chunks_mut(BLOCK).zip(b.id.chunks_mut(BLOCK)))
+                    .collect();
+                let first = &mut first[0];
+                let blocks: Vec<(Block, Vec<Block>)> = first
+                    .key
                     .chunks_mut(BLOCK)
+                    .zip(first.id.chunks_mut(BLOCK))
                     .map(|out| (out, rest.iter_mut().map(|it| it.next().expect("same size")).collect()))
                     .collect();
-                blocks.into_par_iter().for_each(|(out, others)| {
-                    for other in others {
-                        for (o, x) in out.iter_mut().zip(other.iter_mut()) {
-                            *o = (*o).min(*x);
-                            *x = EMPTY;
+                blocks.into_par_iter().for_each(|((ok, oi), others)| {
+                    for (xk, xi) in others {
+                        for (((ok, oi), xk), xi) in
+                            ok.iter_mut().zip(oi.iter_mut()).zip(xk.iter_mut()).zip(xi.iter())
+                        {
+                            if *xk < *ok {
+                                *ok = *xk;
+                                *oi = *xi;
+                            }
+                            *xk = EMPTY;
                         }
                     }
                 });
@@ -205,17 +235,10 @@ impl Renderer {
             self.tables_for = Some(k);
         }
         let nv = mesh.positions.len();
-        self.verts.resize(nv, [0.0; 8]);
-        let half_near = 0.5 * k.znear;
+        self.verts.resize(nv, [0.0; 4]);
         let xf = |p: &[f64; 3], out: &mut Vert| {
             let q = camera.to_camera(*p);
-            let (u, v) = if q[2] > half_near {
-                let iz = 1.0 / q[2];
-                ((k.cx + k.fx * q[0] * iz) as f32, (k.cy + k.fy * q[1] * iz) as f32)
-            } else {
-                (0.0, 0.0)
-            };
-            *out = [q[0] as f32, q[1] as f32, q[2] as f32, u, v, 0.0, 0.0, 0.0];
+            *out = [q[0] as f32, q[1] as f32, q[2] as f32, 0.0];
         };
         const CH: usize = 8192;
         if parallel && nv > 2 * CH {
@@ -244,28 +267,32 @@ impl Renderer {
     }
 }
 
-/// Unpacks a z-buffer into `frame` (depth 0 and [`NO_HIT`] where nothing was drawn) and
-/// resets the z-buffer to [`EMPTY`].
+/// Moves a z-buffer into `frame` (depth 0 and [`NO_HIT`] where nothing was drawn) and
+/// resets its keys to [`EMPTY`]. The id buffer is swapped with the frame's.
 #[inline(never)]
-fn resolve(zbuf: &mut [u64], camera: &Camera, frame: &mut Frame, parallel: bool) {
-    let n = zbuf.len();
+fn resolve(zb: &mut ZBuf, camera: &Camera, frame: &mut Frame, parallel: bool) {
+    let n = zb.key.len() - LANES;
     frame.camera = *camera;
     frame.depth.resize(n, 0.0);
-    frame.triangle.resize(n, NO_HIT);
-    let run = |z: &mut [u64], d: &mut [f32], t: &mut [u32]| {
+    std::mem::swap(&mut frame.triangle, &mut zb.id);
+    frame.triangle.truncate(n);
+    let run = |z: &mut [u32], d: &mut [f32], t: &mut [u32]| {
         for ((z, d), t) in z.iter_mut().zip(d).zip(t) {
             let key = *z;
             *z = EMPTY;
-            *d = unpack_depth(key);
-            *t = key as u32;
+            *d = key_depth(key);
+            if key == EMPTY {
+                *t = NO_HIT;
+            }
         }
     };
     if parallel {
-        zbuf.par_chunks_mut(BLOCK)
+        zb.key[..n]
+            .par_chunks_mut(BLOCK)
             .zip(frame.depth.par_chunks_mut(BLOCK).zip(frame.triangle.par_chunks_mut(BLOCK)))
             .for_each(|(z, (d, t))| run(z, d, t));
     } else {
-        run(zbuf, &mut frame.depth, &mut frame.triangle);
+        run(&mut zb.key[..n], &mut frame.depth, &mut frame.triangle);
     }
 }
 
@@ -330,9 +357,10 @@ struct Batch {
     a: [[f32; BATCH]; 3],
     b: [[f32; BATCH]; 3],
     c: [[f32; BATCH]; 3],
-    /// Sign-normalized plane n·p = d, d > 0.
+    /// Sign-normalized plane n·p = d, d > 0, and 1/d.
     n: [[f32; BATCH]; 3],
     d: [f32; BATCH],
+    inv_d: [f32; BATCH],
     /// Whether the f32 depth is not accurate enough (grazing view).
     grazing: [bool; BATCH],
 }
@@ -341,23 +369,23 @@ struct Batch {
 /// to a build for the running CPU's vector extensions when available. Both builds perform
 /// the same IEEE operations in the same order (Rust never fuses a·b + c on its own), so their
 /// output is identical.
-fn raster_range(s: &Setup, lo: usize, hi: usize, zbuf: &mut [u64]) {
+fn raster_range(s: &Setup, lo: usize, hi: usize, zb: &mut ZBuf) {
     #[cfg(target_arch = "x86_64")]
     {
         if s.simd && std::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports the enabled features (checked just above).
-            unsafe { raster_range_avx2(s, lo, hi, zbuf) };
+            unsafe { raster_range_avx2(s, lo, hi, zb) };
             return;
         }
     }
-    raster_range_impl::<false>(s, lo, hi, zbuf);
+    raster_range_impl::<false>(s, lo, hi, zb);
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,sse4.1")]
 #[inline(never)]
-unsafe fn raster_range_avx2(s: &Setup, lo: usize, hi: usize, zbuf: &mut [u64]) {
-    raster_range_impl::<true>(s, lo, hi, zbuf);
+unsafe fn raster_range_avx2(s: &Setup, lo: usize, hi: usize, zb: &mut ZBuf) {
+    raster_range_impl::<true>(s, lo, hi, zb);
 }
 
 /// Per-row constants of one triangle for the pixel kernels.
@@ -375,30 +403,48 @@ struct RowConst {
     wmax: f32,
 }
 
-/// Coverage of the LANES pixels whose ray coordinates are `px`: bit j is set when all three
-/// edge functions are ≥ 0 and the inverse depth `w[j]` (written for every lane) lies in
-/// [wmin, wmax].
+/// Draws the first `rem` (1..=LANES) of the LANES pixels whose ray coordinates are `px`:
+/// a pixel is covered when all three edge functions are ≥ 0 and its inverse depth lies in
+/// [wmin, wmax]; a covered pixel whose depth key is strictly smaller than `keys[j]` replaces
+/// `keys[j]`, `ids[j]`.
 #[inline(always)]
-fn cover_scalar(k: &RowConst, px: &[f32; LANES], w: &mut [f32; LANES]) -> u32 {
-    let mut mask = 0u32;
-    for (j, &x) in px.iter().enumerate() {
+fn span_scalar(
+    k: &RowConst,
+    px: &[f32; LANES],
+    keys: &mut [u32; LANES],
+    ids: &mut [u32; LANES],
+    rem: usize,
+    id: u32,
+) {
+    for j in 0..rem {
+        let x = px[j];
         let e0 = k.a[0] * x + k.r[0];
         let e1 = k.a[1] * x + k.r[1];
         let e2 = k.a[2] * x + k.r[2];
-        let wj = (k.n0 * x + k.rw) * k.inv_d;
-        w[j] = wj;
-        let inside = (e0 >= 0.0) & (e1 >= 0.0) & (e2 >= 0.0) & (wj >= k.wmin) & (wj <= k.wmax);
-        mask |= (inside as u32) << j;
+        let w = (k.n0 * x + k.rw) * k.inv_d;
+        if (e0 >= 0.0) & (e1 >= 0.0) & (e2 >= 0.0) & (w >= k.wmin) & (w <= k.wmax) {
+            let key = depth_key(w);
+            if key < keys[j] {
+                keys[j] = key;
+                ids[j] = id;
+            }
+        }
     }
-    mask
 }
 
-/// [`cover_scalar`] with AVX: the same multiplications, additions and ordered comparisons,
-/// so the same bits.
+/// [`span_scalar`] with AVX2, branch-free: the same multiplications, additions and ordered
+/// comparisons, an unsigned key comparison and masked stores, so the same result.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[inline]
-unsafe fn cover_avx2(k: &RowConst, px: &[f32; LANES], w: &mut [f32; LANES]) -> u32 {
+unsafe fn span_avx2(
+    k: &RowConst,
+    px: &[f32; LANES],
+    keys: &mut [u32; LANES],
+    ids: &mut [u32; LANES],
+    rem: usize,
+    id: u32,
+) {
     use std::arch::x86_64::*;
     let x = _mm256_loadu_ps(px.as_ptr());
     let zero = _mm256_setzero_ps();
@@ -406,12 +452,21 @@ unsafe fn cover_avx2(k: &RowConst, px: &[f32; LANES], w: &mut [f32; LANES]) -> u
     let m0 = _mm256_cmp_ps::<_CMP_GE_OQ>(lin(k.a[0], k.r[0]), zero);
     let m1 = _mm256_cmp_ps::<_CMP_GE_OQ>(lin(k.a[1], k.r[1]), zero);
     let m2 = _mm256_cmp_ps::<_CMP_GE_OQ>(lin(k.a[2], k.r[2]), zero);
-    let wv = _mm256_mul_ps(lin(k.n0, k.rw), _mm256_set1_ps(k.inv_d));
-    _mm256_storeu_ps(w.as_mut_ptr(), wv);
-    let m3 = _mm256_cmp_ps::<_CMP_GE_OQ>(wv, _mm256_set1_ps(k.wmin));
-    let m4 = _mm256_cmp_ps::<_CMP_LE_OQ>(wv, _mm256_set1_ps(k.wmax));
-    let m = _mm256_and_ps(_mm256_and_ps(m0, m1), _mm256_and_ps(m2, m3)); let _ = m4;
-    _mm256_movemask_ps(m) as u32
+    let w = _mm256_mul_ps(lin(k.n0, k.rw), _mm256_set1_ps(k.inv_d));
+    let m3 = _mm256_cmp_ps::<_CMP_GE_OQ>(w, _mm256_set1_ps(k.wmin));
+    let m4 = _mm256_cmp_ps::<_CMP_LE_OQ>(w, _mm256_set1_ps(k.wmax));
+    let cover =
+        _mm256_castps_si256(_mm256_and_ps(_mm256_and_ps(_mm256_and_ps(m0, m1), _mm256_and_ps(m2, m3)), m4));
+    // key = u32::MAX − bits(w); unsigned key < old via the sign-flip trick.
+    let key = _mm256_sub_epi32(_mm256_set1_epi32(-1), _mm256_castps_si256(w));
+    let old = _mm256_loadu_si256(keys.as_ptr() as *const __m256i);
+    let sign = _mm256_set1_epi32(i32::MIN);
+    let nearer = _mm256_cmpgt_epi32(_mm256_xor_si256(old, sign), _mm256_xor_si256(key, sign));
+    let in_span =
+        _mm256_cmpgt_epi32(_mm256_set1_epi32(rem as i32), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+    let m = _mm256_and_si256(_mm256_and_si256(cover, nearer), in_span);
+    _mm256_maskstore_epi32(keys.as_mut_ptr() as *mut i32, m, key);
+    _mm256_maskstore_epi32(ids.as_mut_ptr() as *mut i32, m, _mm256_set1_epi32(id as i32));
 }
 
 /// Loads the corners of triangles `t0 .. t0 + BATCH` (all in range) into `p` with AVX2
@@ -420,22 +475,30 @@ unsafe fn cover_avx2(k: &RowConst, px: &[f32; LANES], w: &mut [f32; LANES]) -> u
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[inline]
-unsafe fn gather_avx2(s: &Setup, t0: usize, p: &mut [[[f32; BATCH]; 5]; 3]) -> bool {
+#[allow(clippy::needless_range_loop)] // lane-indexed structure-of-arrays code
+unsafe fn gather_avx2(s: &Setup, t0: usize, p: &mut [[[f32; BATCH]; 3]; 3]) -> bool {
     use std::arch::x86_64::*;
-    const { assert!(BATCH == 8 && std::mem::size_of::<Vert>() == 32) };
+    const { assert!(BATCH == 8 && std::mem::size_of::<Vert>() == 16) };
+    if s.verts.len() >= 1 << 29 {
+        return false; // element offsets would overflow i32
+    }
     let base = s.tris[t0..t0 + BATCH].as_ptr() as *const i32;
     let lane3 = _mm256_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21);
-    let idx = [0, 1, 2].map(|c| _mm256_i32gather_epi32::<4>(base, _mm256_add_epi32(lane3, _mm256_set1_epi32(c))));
+    let idx =
+        [0, 1, 2].map(|c| _mm256_i32gather_epi32::<4>(base, _mm256_add_epi32(lane3, _mm256_set1_epi32(c))));
     let mut m = [0u32; 8];
-    _mm256_storeu_si256(m.as_mut_ptr() as *mut __m256i, _mm256_max_epu32(_mm256_max_epu32(idx[0], idx[1]), idx[2]));
+    _mm256_storeu_si256(
+        m.as_mut_ptr() as *mut __m256i,
+        _mm256_max_epu32(_mm256_max_epu32(idx[0], idx[1]), idx[2]),
+    );
     if m.iter().any(|&i| i as usize >= s.verts.len()) {
         return false;
     }
     let vbase = s.verts.as_ptr() as *const f32;
     for c in 0..3 {
-        // Element offset of vertex i's component q: 8·i + q (indices < verts.len() ≤ 2²⁸).
-        let off = _mm256_slli_epi32::<3>(idx[c]);
-        for q in 0..5 {
+        // Element offset of vertex i's component q: 4·i + q (indices < verts.len() < 2²⁹).
+        let off = _mm256_slli_epi32::<2>(idx[c]);
+        for q in 0..3 {
             let g = _mm256_i32gather_ps::<4>(vbase, _mm256_add_epi32(off, _mm256_set1_epi32(q as i32)));
             _mm256_storeu_ps(p[c][q].as_mut_ptr(), g);
         }
@@ -447,14 +510,16 @@ unsafe fn gather_avx2(s: &Setup, t0: usize, p: &mut [[[f32; BATCH]; 5]; 3]) -> b
 /// rejection, bounding boxes, edge and plane constants, all branch-free so that it
 /// vectorizes.
 #[inline(always)]
+#[allow(clippy::needless_range_loop)] // lane-indexed structure-of-arrays code
 fn setup_batch<const AVX: bool>(s: &Setup, t0: usize, hi: usize, out: &mut Batch) {
     let k = &s.camera.intrinsics;
     let zn32 = k.znear as f32;
     let zf32 = k.zfar as f32;
     let half_near = (0.5 * k.znear) as f32;
     let (wf, hf) = (k.width as f32, k.height as f32);
-    // Corner coordinates, structure of arrays: p[corner][x, y, z, u, v][lane].
-    let mut p = [[[0.0f32; BATCH]; 5]; 3];
+    let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
+    // Corner coordinates, structure of arrays: p[corner][x, y, z][lane].
+    let mut p = [[[0.0f32; BATCH]; 3]; 3];
     let last = hi - 1;
     #[cfg(target_arch = "x86_64")]
     let gathered = AVX && t0 + BATCH <= hi && {
@@ -468,16 +533,26 @@ fn setup_batch<const AVX: bool>(s: &Setup, t0: usize, hi: usize, out: &mut Batch
             let tri = s.tris[(t0 + j).min(last)];
             for (c, &i) in tri.iter().enumerate() {
                 let v = &s.verts[i as usize];
-                for q in 0..5 {
+                for q in 0..3 {
                     p[c][q][j] = v[q];
                 }
             }
         }
     }
     for j in 0..BATCH {
-        let (x0, y0, z0, u0, v0) = (p[0][0][j], p[0][1][j], p[0][2][j], p[0][3][j], p[0][4][j]);
-        let (x1, y1, z1, u1, v1) = (p[1][0][j], p[1][1][j], p[1][2][j], p[1][3][j], p[1][4][j]);
-        let (x2, y2, z2, u2, v2) = (p[2][0][j], p[2][1][j], p[2][2][j], p[2][3][j], p[2][4][j]);
+        let (x0, y0, z0) = (p[0][0][j], p[0][1][j], p[0][2][j]);
+        let (x1, y1, z1) = (p[1][0][j], p[1][1][j], p[1][2][j]);
+        let (x2, y2, z2) = (p[2][0][j], p[2][1][j], p[2][2][j]);
+        // Projected corners (meaningful where z > znear / 2; NaN/inf elsewhere, which the
+        // bounding-box clamps below turn into in-range values of an unused box). f32 error
+        // ~1e-4 px inside the image, below BBOX_MARGIN.
+        let proj = |x: f32, y: f32, z: f32| {
+            let iz = 1.0 / z;
+            (cx + fx * x * iz, cy + fy * y * iz)
+        };
+        let (u0, v0) = proj(x0, y0, z0);
+        let (u1, v1) = proj(x1, y1, z1);
+        let (u2, v2) = proj(x2, y2, z2);
         let zmin = z0.min(z1).min(z2);
         let zmax = z0.max(z1).max(z2);
         // f32 rounding is monotone, so this rejection is exact for the f64 depths.
@@ -517,6 +592,7 @@ fn setup_batch<const AVX: bool>(s: &Setup, t0: usize, hi: usize, out: &mut Batch
         }
         let d = sg * d;
         out.d[j] = d;
+        out.inv_d[j] = 1.0 / d;
         // The f32 depth d / (n·r) is accurate to ~3ε·(sd / d + S / (n·r)) relative, with
         // S = |n0·px| + |n1·py| + |n2| ≤ sr and n·r = d / z ≥ d / zmax on the triangle. Where
         // that exceeds 3ε·GRAZING_GAIN (grazing views), the depth is computed in f64.
@@ -538,7 +614,7 @@ fn setup_batch<const AVX: bool>(s: &Setup, t0: usize, hi: usize, out: &mut Batch
 }
 
 #[inline(always)]
-fn raster_range_impl<const AVX: bool>(s: &Setup, lo: usize, hi: usize, zbuf: &mut [u64]) {
+fn raster_range_impl<const AVX: bool>(s: &Setup, lo: usize, hi: usize, zb: &mut ZBuf) {
     let k = &s.camera.intrinsics;
     let (w, h) = (k.width as i32, k.height as i32);
     if w == 0 || h == 0 || lo >= hi {
@@ -556,6 +632,7 @@ fn raster_range_impl<const AVX: bool>(s: &Setup, lo: usize, hi: usize, zbuf: &mu
         c: [[0.0; BATCH]; 3],
         n: [[0.0; BATCH]; 3],
         d: [0.0; BATCH],
+        inv_d: [0.0; BATCH],
         grazing: [false; BATCH],
     };
     let mut t0 = lo;
@@ -595,44 +672,35 @@ fn raster_range_impl<const AVX: bool>(s: &Setup, lo: usize, hi: usize, zbuf: &mu
             let id = t as u32;
             let [x0, x1, y0, y1] = bb.map(|x| x as usize);
             if flag == PRECISE {
-                draw_precise(s, s.tris[t], [a, b, c], id, [x0, x1, y0, y1], zbuf);
+                draw_precise(s, s.tris[t], [a, b, c], id, [x0, x1, y0, y1], zb);
                 continue;
             }
             let n = [batch.n[0][j], batch.n[1][j], batch.n[2][j]];
-            let mut rc = RowConst { a, r: [0.0; 3], n0: n[0], rw: 0.0, inv_d: 1.0 / batch.d[j], wmin, wmax };
-            let mut w = [0.0f32; LANES];
+            let mut rc = RowConst { a, r: [0.0; 3], n0: n[0], rw: 0.0, inv_d: batch.inv_d[j], wmin, wmax };
             for v in y0..=y1 {
                 let py = s.py[v];
                 rc.r = [b[0] * py + c[0], b[1] * py + c[1], b[2] * py + c[2]];
                 rc.rw = n[1] * py + n[2];
-                let row = &mut zbuf[v * wu..v * wu + wu];
+                let off = v * wu;
                 let mut u = x0;
                 while u <= x1 {
-                    // Coverage and inverse depth of LANES pixels at once, then the z-test of
-                    // the covered ones. The px table is padded with NaN (never covered).
+                    // LANES pixels at once: coverage, inverse depth, z-test, masked update.
+                    // The px table is padded with NaN (never covered) and the z-buffer with
+                    // LANES pixels, so full-width reads stay in bounds.
                     let pxs: &[f32; LANES] = s.px[u..u + LANES].try_into().expect("padded table");
+                    let keys: &mut [u32; LANES] =
+                        (&mut zb.key[off + u..off + u + LANES]).try_into().expect("padded buffer");
+                    let ids: &mut [u32; LANES] =
+                        (&mut zb.id[off + u..off + u + LANES]).try_into().expect("padded buffer");
+                    let rem = (x1 + 1 - u).min(LANES);
                     #[cfg(target_arch = "x86_64")]
-                    let mut mask = if AVX {
+                    if AVX {
                         // SAFETY: AVX is only true in the avx2-enabled build.
-                        unsafe { cover_avx2(&rc, pxs, &mut w) }
-                    } else {
-                        cover_scalar(&rc, pxs, &mut w)
-                    };
-                    #[cfg(not(target_arch = "x86_64"))]
-                    let mut mask = cover_scalar(&rc, pxs, &mut w);
-                    let rem = x1 + 1 - u;
-                    if rem < LANES {
-                        mask &= (1u32 << rem) - 1;
+                        unsafe { span_avx2(&rc, pxs, keys, ids, rem, id) };
+                        u += LANES;
+                        continue;
                     }
-                    while mask != 0 {
-                        let j = mask.trailing_zeros() as usize;
-                        mask &= mask - 1;
-                        let key = pack(w[j], id);
-                        let slot = &mut row[u + j];
-                        if key < *slot {
-                            *slot = key;
-                        }
-                    }
+                    span_scalar(&rc, pxs, keys, ids, rem, id);
                     u += LANES;
                 }
             }
@@ -645,13 +713,14 @@ fn raster_range_impl<const AVX: bool>(s: &Setup, lo: usize, hi: usize, zbuf: &mu
 /// triangle, to stay watertight), depth and depth-range test in f64 from the f64
 /// camera-frame corners.
 #[inline(never)]
+#[allow(clippy::needless_range_loop)] // lane-indexed structure-of-arrays code
 fn draw_precise(
     s: &Setup,
     corners: [u32; 3],
     [a, b, c]: [[f32; 3]; 3],
     id: u32,
     [x0, x1, y0, y1]: [usize; 4],
-    zbuf: &mut [u64],
+    zb: &mut ZBuf,
 ) {
     let [p, q, r] = corners.map(|i| s.camera.to_camera(s.positions[i as usize]));
     let e1 = [q[0] - p[0], q[1] - p[1], q[2] - p[2]];
@@ -666,7 +735,8 @@ fn draw_precise(
         let r1 = b[1] * py + c[1];
         let r2 = b[2] * py + c[2];
         let rw = n[1] * s.py64[v] + n[2];
-        let row = &mut zbuf[v * wu..v * wu + wu];
+        let rk = &mut zb.key[v * wu..v * wu + wu];
+        let ri = &mut zb.id[v * wu..v * wu + wu];
         for u in x0..=x1 {
             let px = s.px[u];
             let e0 = a[0] * px + r0;
@@ -676,9 +746,10 @@ fn draw_precise(
                 // d / (n·r) does not depend on the orientation of n.
                 let z = d / (n[0] * s.px64[u] + rw);
                 if z >= zn && z <= zf {
-                    let key = pack((1.0 / z) as f32, id);
-                    if key < row[u] {
-                        row[u] = key;
+                    let key = depth_key((1.0 / z) as f32);
+                    if key < rk[u] {
+                        rk[u] = key;
+                        ri[u] = id;
                     }
                 }
             }

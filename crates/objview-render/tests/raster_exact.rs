@@ -185,7 +185,8 @@ fn tessellated_sphere_matches_the_analytic_sphere() {
             let [a, b, c] = mesh.triangle(t);
             let e1: [f64; 3] = std::array::from_fn(|k| b[k] - a[k]);
             let e2: [f64; 3] = std::array::from_fn(|k| c[k] - a[k]);
-            let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
+            let n =
+                [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
             let nn = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
             1.0 - (n[0] * a[0] + n[1] * a[1] + n[2] * a[2]).abs() / nn
         })
@@ -301,7 +302,9 @@ fn look_at_point_lands_between_the_four_centre_pixels() {
         // A square of half-width 0.9 px centred on the look-at point, facing the camera.
         let dist: f64 = (0..3).map(|k| (l[k] - c[k]).powi(2)).sum::<f64>().sqrt();
         let s = 0.9 * dist / cam.intrinsics.fx;
-        let corner = |a: f64, b: f64| -> [f64; 3] { std::array::from_fn(|k| l[k] + a * s * cam.right[k] + b * s * cam.down[k]) };
+        let corner = |a: f64, b: f64| -> [f64; 3] {
+            std::array::from_fn(|k| l[k] + a * s * cam.right[k] + b * s * cam.down[k])
+        };
         let mesh = Mesh::new(
             vec![corner(-1.0, -1.0), corner(1.0, -1.0), corner(1.0, 1.0), corner(-1.0, 1.0)],
             vec![[0, 1, 2], [0, 2, 3]],
@@ -319,7 +322,10 @@ fn roll_pi_rotates_the_image_by_180_degrees() {
     let mesh = soup(300, 11);
     let p = Pose::from_direction([1.0, 1.0, 0.5], 3.0);
     let a = objview_render::render(&mesh, &Camera::with_default_intrinsics(p));
-    let b = objview_render::render(&mesh, &Camera::with_default_intrinsics(Pose { roll: std::f64::consts::PI, ..p }));
+    let b = objview_render::render(
+        &mesh,
+        &Camera::with_default_intrinsics(Pose { roll: std::f64::consts::PI, ..p }),
+    );
     // Pixel (u, v) of the rolled camera sees what pixel (511 − u, 511 − v) sees.
     let mut flipped = Frame::empty(b.camera);
     for i in 0..512 * 512 {
@@ -357,7 +363,11 @@ fn renderer_reuse_matches_fresh_renders_and_handles_degenerate_input() {
     let mut f = Frame::empty(Camera::with_default_intrinsics(Pose::from_direction([1.0, 0.0, 0.0], 3.0)));
     let a = icosphere(3);
     let b = soup(500, 5);
-    for (mesh, intr, dir) in [(&a, Intrinsics::default(), [1.0, 0.0, 0.0]), (&b, small(), [0.0, 1.0, 0.2]), (&a, small(), [0.0, 0.0, 1.0])] {
+    for (mesh, intr, dir) in [
+        (&a, Intrinsics::default(), [1.0, 0.0, 0.0]),
+        (&b, small(), [0.0, 1.0, 0.2]),
+        (&a, small(), [0.0, 0.0, 1.0]),
+    ] {
         let cam = Camera::new(Pose::from_direction(dir, 2.5), intr);
         r.render_into(mesh, &cam, &mut f);
         assert_eq!(f, objview_render::render(mesh, &cam));
@@ -411,5 +421,29 @@ fn portable_and_simd_paths_are_bit_identical() {
             assert!(a.depth.iter().map(|x| x.to_bits()).eq(b.depth.iter().map(|x| x.to_bits())));
             assert_eq!(a.triangle, b.triangle);
         }
+    }
+}
+
+#[test]
+fn near_and_far_planes_cut_triangles_like_the_oracle() {
+    // Camera-frame planes z = z0 + s·(x + y) through the view whose depth crosses
+    // znear = 0.01 (z0 = 0.008, s = 2) and zfar = 10 (z0 = 8, s = 2) along a diagonal of
+    // the image, so that screen bounding boxes cannot do the cutting.
+    let cam = Camera::new(Pose { center: [0.3, -2.0, 0.5], look_at: [0.0, 0.1, 0.0], roll: 0.2 }, small());
+    for (z0, slope, zs) in [(0.008, 2.0, [0.001, 5.0]), (8.0, 2.0, [1.0, 30.0])] {
+        let p = |x: f64, z: f64| cam.to_object([x, (z - z0) / slope - x, z]);
+        let mesh = Mesh::new(
+            vec![p(-30.0, zs[0]), p(30.0, zs[0]), p(-40.0, zs[1]), p(40.0, zs[1])],
+            vec![[0, 1, 3], [0, 3, 2]],
+        );
+        let f = objview_render::render(&mesh, &cam);
+        let o = reference::render(&mesh, &cam);
+        let c = compare(&f, &o);
+        eprintln!("z0 {z0}: {} hits, {} disagreeing", c.hits, c.total - c.agree);
+        // The cut runs across the image: both hits and misses, nothing lost or added.
+        assert!(c.hits > 2000 && c.hits < 14000, "{}", c.hits);
+        assert!(c.agree as f64 / c.total as f64 >= 0.999);
+        assert_eq!(c.non_silhouette, 0);
+        assert!(f.depth.iter().all(|&z| z == 0.0 || (0.01..=10.0).contains(&z)));
     }
 }

@@ -4,7 +4,11 @@
 //! Recipe (all stages are deterministic functions of `(n, seed, effort)`; parallel multi-starts
 //! are reduced in a fixed order, so the result does not depend on the thread count):
 //! 1. Starts: a Fibonacci spiral, icosadeltahedral (Goldberg–Coxeter) grids when
-//!    `n = 10(h²+hk+k²)+2`, and seeded uniform random points (ChaCha8, one stream per start).
+//!    `n = 10(h²+hk+k²)+2`, seeded random starts with tetrahedral, octahedral or icosahedral
+//!    rotational symmetry (random generic orbits plus special orbits — vertices, edge midpoints,
+//!    face centres — whenever `n` decomposes that way; several records, e.g. N = 200, are
+//!    symmetric and hard to reach otherwise), and seeded uniform random points (ChaCha8, one
+//!    stream per start).
 //! 2. Riesz s-energy descent with s = 6, 12, 24, 48, 96, 192 (L-BFGS on the sphere; the energy
 //!    is scaled by the stage's starting minimum distance so large s does not overflow, and pairs
 //!    whose contribution is below ~1e-12 of the closest one are cut off with a z-sorted sweep).

@@ -3,7 +3,8 @@
 //!
 //! A view-set file holds one `x y z` per line; `#` starts a comment (whole-line or trailing) and
 //! blank lines are ignored. Every direction is normalized on load, so files written with a few
-//! decimals (as the official ones are) are accepted as they are. Files are written with Rust's
+//! decimals (as the official ones are) are accepted as they are; a direction that is already
+//! unit to round-off (|d|² within 8 ulp of 1) is kept bit for bit. Files are written with Rust's
 //! shortest round-trip float formatting, so `write` → `load` gives back bit-identical unit
 //! vectors and the output is deterministic.
 
@@ -108,8 +109,14 @@ impl ViewSet {
                 }
                 v[k] = x;
             }
-            let n = normalize(v).ok_or_else(|| bad("zero vector cannot be normalized".into()))?;
-            dirs.push(n);
+            let r2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+            if (r2 - 1.0).abs() <= 8.0 * f64::EPSILON {
+                // Already unit to round-off: kept bit for bit, so write → load is exact.
+                dirs.push(v);
+            } else {
+                let n = normalize(v).ok_or_else(|| bad("zero vector cannot be normalized".into()))?;
+                dirs.push(n);
+            }
         }
         if dirs.is_empty() {
             return Err(ViewsError::EmptyViewSet { path: origin.to_string() });

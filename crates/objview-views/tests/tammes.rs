@@ -2,7 +2,7 @@
 //! shipped small sets are reproducible, and the embedded best-known table.
 
 use objview_views::tammes::{
-    best_known_deg, fibonacci, generate, icosadeltahedral, optimize, Effort, DEFAULT_SEED,
+    best_known_deg, fibonacci, file_header, generate, icosadeltahedral, optimize, Effort, DEFAULT_SEED,
 };
 use objview_views::ViewSet;
 
@@ -46,10 +46,14 @@ fn same_seed_gives_identical_bytes_regardless_of_threads() {
 
 #[test]
 fn generate_reproduces_shipped_small_sets() {
-    for n in [6, 8] {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/viewsets");
+    for n in [6, 8, 10, 12] {
         let shipped = ViewSet::resolve(&format!("tammes-{n}")).unwrap();
         let again = generate(n, DEFAULT_SEED);
         assert_eq!(again.dirs, shipped.dirs, "tammes-{n}");
+        // Byte for byte, header included.
+        let file = std::fs::read_to_string(dir.join(format!("tammes-{n}.txt"))).unwrap();
+        assert_eq!(again.to_text(&file_header(&again, DEFAULT_SEED)), file, "tammes-{n}");
     }
 }
 

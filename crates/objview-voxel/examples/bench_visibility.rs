@@ -27,10 +27,26 @@ fn icosphere(level: u32, radius: f64, centre: [f64; 3]) -> Mesh {
         [-t, 0.0, 1.0],
     ];
     let mut tris: Vec<[u32; 3]> = vec![
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
-        [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
-        [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
     ];
     for _ in 0..level {
         let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
@@ -135,7 +151,12 @@ fn main() {
     let mesh = merge(icosphere(6, 0.55, [-0.35, 0.0, 0.0]), torus(0.3, 0.12, 128, 72, [0.5, 0.0, 0.0]));
     let cloud = sample(&mesh, 300_000, 7);
     let poses: Vec<Pose> = fibonacci(128).into_iter().map(|d| Pose::from_direction(d, 3.0)).collect();
-    println!("mesh: {} triangles, cloud: {} points, {} views", mesh.num_triangles(), cloud.len(), poses.len());
+    println!(
+        "mesh: {} triangles, cloud: {} points, {} views",
+        mesh.num_triangles(),
+        cloud.len(),
+        poses.len()
+    );
     let b = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
@@ -143,4 +164,20 @@ fn main() {
         .install(|| bench_visibility(&mesh, &cloud, 0.02, &poses, repeats, mesh_views))
         .expect("bench");
     println!("{b:#?}");
+    // S_gt build time at the SPEC's largest cloud size, on the caller's threads.
+    let big = sample(&mesh, 2_000_000, 8);
+    let mut t = Vec::new();
+    for _ in 0..5 {
+        let s = std::time::Instant::now();
+        let set = objview_voxel::VoxelSet::from_points(&big, 0.02).expect("set");
+        t.push(s.elapsed().as_secs_f64() * 1e3);
+        assert!(!set.is_empty());
+    }
+    t.sort_by(|a, b| a.total_cmp(b));
+    println!(
+        "2M-point S_gt build: median {:.2} ms, min {:.2} ms ({} threads)",
+        t[2],
+        t[0],
+        rayon::current_num_threads()
+    );
 }

@@ -42,40 +42,64 @@ impl VoxelSet {
     /// gives the empty set.
     pub fn from_points(points: &[[f64; 3]], r: f64) -> Result<VoxelSet, VoxelError> {
         check_resolution(r)?;
+        if points.is_empty() {
+            return Ok(VoxelSet::empty(r));
+        }
         let mut lo = [f64::INFINITY; 3];
         let mut hi = [f64::NEG_INFINITY; 3];
+        let mut nan = false;
         for p in points {
             for a in 0..3 {
                 lo[a] = lo[a].min(p[a]);
                 hi[a] = hi[a].max(p[a]);
+                nan |= p[a].is_nan();
             }
         }
-        if points.is_empty() {
-            return Ok(VoxelSet::empty(r));
-        }
-        // NaN is ignored by min/max; look for it (and infinities) only when the box is odd.
-        let bad = |x: f64| !x.is_finite();
-        if lo.iter().chain(&hi).any(|&x| bad(x)) || points.iter().any(|p| p.iter().any(|x| x.is_nan()))
-        {
-            let index = points.iter().position(|p| p.iter().any(|&x| bad(x))).unwrap_or(0);
+        if nan || lo.iter().chain(&hi).any(|x| !x.is_finite()) {
+            let index = points.iter().position(|p| p.iter().any(|x| !x.is_finite())).unwrap_or(0);
             return Err(VoxelError::NonFinitePoint { index, point: points[index] });
         }
-        for (corner, which) in [(lo, 0), (hi, 1)] {
-            if corner.iter().any(|&x| !key_fits(x, r)) {
-                let index = points
-                    .iter()
-                    .position(|p| p.iter().any(|&x| !key_fits(x, r)))
-                    .unwrap_or(which);
-                return Err(VoxelError::KeyOutOfRange { index, point: points[index], resolution: r });
-            }
+        if lo.iter().chain(&hi).any(|&x| !key_fits(x, r)) {
+            let index = points.iter().position(|p| p.iter().any(|&x| !key_fits(x, r))).unwrap_or(0);
+            return Err(VoxelError::KeyOutOfRange { index, point: points[index], resolution: r });
         }
         // floor(x / r) is monotone in x, so the key box is the key of the point box.
         let (kmin, kmax) = (key_of(lo, r), key_of(hi, r));
         let mut set = VoxelSet::with_box(r, kmin, kmax)?;
-        for p in points {
-            let b = set.bit_of_key_unchecked(key_of(*p, r));
-            set.bits[b >> 6] |= 1u64 << (b & 63);
-        }
+        let inv = 1.0 / r;
+        let mut own = std::mem::take(&mut set.bits);
+        let fill = |bits: &mut [u64], chunk: &[[f64; 3]]| {
+            for p in chunk {
+                let k = [fast_key(p[0], r, inv), fast_key(p[1], r, inv), fast_key(p[2], r, inv)];
+                let b = set.bit_of_key_unchecked(k);
+                bits[b >> 6] |= 1u64 << (b & 63);
+            }
+        };
+        let bits = if points.len() >= PARALLEL_POINTS {
+            use rayon::prelude::*;
+            let words = own.len();
+            points
+                // One chunk (one bitmap) per thread.
+                .par_chunks(points.len().div_ceil(rayon::current_num_threads()).max(PARALLEL_POINTS / 2))
+                .fold(
+                    || vec![0u64; words],
+                    |mut acc, chunk| {
+                        fill(&mut acc, chunk);
+                        acc
+                    },
+                )
+                .reduce(
+                    || vec![0u64; words],
+                    |mut a, b| {
+                        a.iter_mut().zip(&b).for_each(|(x, y)| *x |= y);
+                        a
+                    },
+                )
+        } else {
+            fill(&mut own, points);
+            own
+        };
+        set.bits = bits;
         set.finish();
         Ok(set)
     }
@@ -161,11 +185,7 @@ impl VoxelSet {
                 let z = b % row_bits;
                 let xy = b / row_bits;
                 let (x, y) = (xy / self.dims[1], xy % self.dims[1]);
-                keys.push([
-                    self.origin[0] + x as i32,
-                    self.origin[1] + y as i32,
-                    self.origin[2] + z as i32,
-                ]);
+                keys.push([self.origin[0] + x as i32, self.origin[1] + y as i32, self.origin[2] + z as i32]);
             }
         }
         self.rank = rank;
@@ -297,6 +317,27 @@ fn check_resolution(r: f64) -> Result<(), VoxelError> {
     }
 }
 
+/// Point count from which `from_points` fills the bitmap on several threads.
+const PARALLEL_POINTS: usize = 1 << 17;
+
+/// `floor(x / r)` for a coordinate whose key is known to fit in i32, exactly as `key_of`
+/// computes it, but mostly without the division: `x·(1/r)` differs from `x / r` by a few ulps,
+/// which can only change the floor when the quotient is within ~1e-9 (relative) of an integer;
+/// those rare cases take the exact division.
+#[inline]
+fn fast_key(x: f64, r: f64, inv: f64) -> i32 {
+    let q = x * inv;
+    let t = q as i64;
+    let f = if (t as f64) > q { t - 1 } else { t };
+    let frac = q - f as f64;
+    let eps = 1e-9 * q.abs().max(1.0);
+    if frac < eps || frac > 1.0 - eps {
+        crate::key::floor_i32(x / r)
+    } else {
+        f as i32
+    }
+}
+
 /// Whether `floor(x / r)` leaves a margin of 2 to the i32 range.
 fn key_fits(x: f64, r: f64) -> bool {
     let q = (x / r).floor();
@@ -330,6 +371,38 @@ mod tests {
         assert!(!s.contains([1, 1, 0]));
         assert_eq!(s.index_of([1000, 0, 0]), None);
         assert_eq!(s.index_of([i32::MIN, i32::MAX, 0]), None);
+    }
+
+    #[test]
+    fn fast_key_matches_key_of() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        for r in [0.02, 0.005, 0.1, 1.0 / 3.0] {
+            let inv = 1.0 / r;
+            for i in -2000..2000 {
+                // Exact multiples of r and their neighbours, where x·(1/r) and x / r can differ.
+                let x = i as f64 * r;
+                for y in [x, f64::from_bits(x.to_bits() + 1), f64::from_bits(x.to_bits().wrapping_sub(1))] {
+                    assert_eq!(fast_key(y, r, inv), key_of([y, 0.0, 0.0], r)[0], "{y} {r}");
+                }
+            }
+            for _ in 0..100_000 {
+                let x: f64 = rng.gen_range(-1.5..1.5);
+                assert_eq!(fast_key(x, r, inv), key_of([x, 0.0, 0.0], r)[0], "{x} {r}");
+            }
+        }
+    }
+
+    #[test]
+    fn parallel_build_matches_sequential_keys() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(6);
+        let pts: Vec<[f64; 3]> = (0..PARALLEL_POINTS * 2 + 17)
+            .map(|_| std::array::from_fn(|_| rng.gen_range(-1.0..1.0)))
+            .collect();
+        let s = VoxelSet::from_points(&pts, 0.05).unwrap();
+        let want: BTreeSet<VoxelKey> = pts.iter().map(|&p| key_of(p, 0.05)).collect();
+        assert_eq!(s.keys(), &want.into_iter().collect::<Vec<_>>()[..]);
     }
 
     #[test]

@@ -11,8 +11,8 @@
 use objview_geom::{Mesh, Pose};
 use objview_render::{Camera, Intrinsics};
 use objview_voxel::{
-    bitset_count, bitset_to_indices, observed_voxels, observed_voxels_mesh, union, union_bitsets,
-    Visibility, VisibilityMode, VoxelSet,
+    bitset_count, bitset_to_indices, observed_voxels, observed_voxels_mesh, union, union_bitsets, Visibility,
+    VisibilityMode, VoxelSet,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -54,14 +54,8 @@ fn cam(d: [f64; 3]) -> Camera {
     Camera::new(Pose::from_direction(d, 3.0), Intrinsics::default())
 }
 
-const AXES: [[f64; 3]; 6] = [
-    [1.0, 0.0, 0.0],
-    [-1.0, 0.0, 0.0],
-    [0.0, 1.0, 0.0],
-    [0.0, -1.0, 0.0],
-    [0.0, 0.0, 1.0],
-    [0.0, 0.0, -1.0],
-];
+const AXES: [[f64; 3]; 6] =
+    [[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]];
 
 #[test]
 fn cube_face_on_sees_exactly_the_facing_layer_in_both_modes() {

@@ -510,8 +510,16 @@ mod tests {
         assert!(saturation(&curve, 10_000, &settings()).unwrap().degenerate_fit);
         curve[0].y = 9_990.0;
         let sat = saturation(&curve, 10_000, &settings()).unwrap();
-        assert!(!sat.degenerate_fit && sat.sigma > MIN_SIGMA);
-        assert_eq!(sat.n_star, 6.0, "nearly flat from the start: plateau at N_min");
+        assert!(!sat.degenerate_fit);
+        // z takes two values (z₁ = Φ⁻¹(0.999) at N = 6, Z_TOP elsewhere): the least-squares slope is
+        // the difference of the group means of x over the difference of the z values.
+        let z1 = 3.09023230616781354; // −Φ⁻¹(0.001), equal to Φ⁻¹(0.999) to ~1e-14
+        let rest: f64 = SATURATION_GRID[1..].iter().map(|&n| (n as f64).ln()).sum::<f64>() / 25.0;
+        let sigma = (rest - 6f64.ln()) / (Z_TOP - z1);
+        let mean_x = (rest * 25.0 + 6f64.ln()) / 26.0;
+        let mu = mean_x - sigma * (Z_TOP * 25.0 + z1) / 26.0;
+        assert!((sat.sigma - sigma).abs() < 1e-11 * sigma, "{} vs {sigma}", sat.sigma);
+        assert!((sat.mu - mu).abs() < 1e-11 * mu.abs(), "{} vs {mu}", sat.mu);
     }
 
     #[test]
@@ -561,9 +569,12 @@ mod tests {
     #[test]
     fn n_star_boundary_rules() {
         let st = settings();
-        // Still rising steeply at N_max (gain over 492 → 502 ≈ 1e-3·|S_gt|): never holds → N_max.
-        let rising = LognormalFit { mu: 492f64.ln() + 2.0, sigma: 1.0, y_max: 1_000.0, degenerate: false };
+        // Still rising at N_max: t(492) = −0.5, gain over 492 → 502 ≈ φ(0.5)·ln(502/492)/3·|S_gt|
+        // ≈ 2.4e-3·|S_gt| > 2e-4·|S_gt|; at N_min (t = −1.97) the gains are larger still. Never
+        // holds → N* = N_max.
+        let rising = LognormalFit { mu: 492f64.ln() + 1.5, sigma: 3.0, y_max: 1_000.0, degenerate: false };
         assert!(!rising.plateau_holds(492.0, 492.0, 1_000, &st));
+        assert!(!rising.plateau_holds(6.0, 492.0, 1_000, &st));
         assert_eq!(saturation_point(&rising, 6.0, 492.0, 1_000, &st), 492.0);
         // A step at N = 100 is invisible from N_min's probe windows [6, 36]: the plateau holds at
         // N_min and N* = N_min, the literal "smallest N" (documented pre-rise behaviour).
@@ -637,9 +648,10 @@ mod tests {
         let below = SaturationSettings { slow_saturation_threshold: d - 1, ..settings() };
         assert!(!saturation(&curve, 80_000, &at).unwrap().slow_saturation);
         assert!(saturation(&curve, 80_000, &below).unwrap().slow_saturation);
-        // With the default threshold 128: a slow and a fast curve from the scan test family.
-        let slow = saturation(&exact_lognormal_curve(2.5, 60_000.0).1, 80_000, &settings()).unwrap();
-        let fast = saturation(&exact_lognormal_curve(0.6, 60_000.0).1, 80_000, &settings()).unwrap();
+        // With the default threshold 128: a slow (power-law) and a fast curve.
+        let power = grid_curve(|n| 50_000.0 * (1.0 - 0.8 * n.powf(-0.7)));
+        let slow = saturation(&power, 60_000, &settings()).unwrap();
+        let fast = saturation(&exact_lognormal_curve(2.5, 60_000.0).1, 80_000, &settings()).unwrap();
         assert!(slow.d_sat > 128 && slow.slow_saturation, "{}", slow.d_sat);
         assert!(fast.d_sat <= 128 && !fast.slow_saturation, "{}", fast.d_sat);
     }
@@ -659,26 +671,5 @@ mod tests {
         assert_eq!(json["settings"]["probe_stride"], 5.0);
         let back: Saturation = serde_json::from_value(json).unwrap();
         assert_eq!(back, sat);
-    }
-}
-#[cfg(test)]
-mod scratch {
-    use super::*;
-    #[test]
-    fn scratch_print() {
-        let st = SaturationSettings::default();
-        let curves: Vec<(&str, Box<dyn Fn(f64) -> f64>)> = vec![
-            ("linear", Box::new(|n: f64| 60_000.0 * n / 492.0)),
-            ("power0.7", Box::new(|n: f64| 50_000.0 * (1.0 - 0.8 * n.powf(-0.7)))),
-            ("power0.3", Box::new(|n: f64| 50_000.0 * (1.0 - 0.9 * n.powf(-0.3)))),
-            ("power0.5", Box::new(|n: f64| 50_000.0 * (1.0 - 0.9 * n.powf(-0.5)))),
-            ("exp40", Box::new(|n: f64| 40_000.0 * (1.0 - (-n / 40.0).exp()))),
-            ("exp100", Box::new(|n: f64| 40_000.0 * (1.0 - (-n / 100.0).exp()))),
-        ];
-        for (name, f) in curves {
-            let c: Vec<CurvePoint> = SATURATION_GRID.iter().map(|&n| CurvePoint::new(n, f(n as f64))).collect();
-            let s = saturation(&c, 60_000, &st).unwrap();
-            eprintln!("{name}: mu {} sigma {} n* {} d {} rvis {} grid {} {}", s.mu, s.sigma, s.n_star, s.d_sat, s.r_vis, s.grid_n, s.grid_r_vis);
-        }
     }
 }

@@ -541,3 +541,247 @@ impl Search<'_> {
         by_size.max(disjoint)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn inst(views: &[&[usize]]) -> CoverInstance {
+        CoverInstance::from_index_lists(&views.iter().map(|v| v.to_vec()).collect::<Vec<_>>(), 1).unwrap()
+    }
+
+    /// Minimum cover size by checking every subset of views against plain element lists — an
+    /// oracle independent of the bitset code.
+    fn oracle_min(views: &[Vec<usize>], universe: &[usize]) -> usize {
+        let n = views.len();
+        (0u32..1 << n)
+            .filter(|&mask| {
+                universe.iter().all(|e| (0..n).any(|v| mask >> v & 1 == 1 && views[v].contains(e)))
+            })
+            .map(|mask| mask.count_ones() as usize)
+            .min()
+            .expect("all views cover the universe")
+    }
+
+    /// A random instance: some views are copies or subsets of earlier ones, to exercise the
+    /// column reductions.
+    fn random_views(rng: &mut ChaCha8Rng) -> Vec<Vec<usize>> {
+        let n_views = rng.gen_range(1..=16);
+        let n_elements = rng.gen_range(0..=70);
+        let density = rng.gen_range(0.03..0.45);
+        let mut views: Vec<Vec<usize>> = Vec::new();
+        for _ in 0..n_views {
+            let view = match (views.is_empty(), rng.gen_range(0..6)) {
+                (false, 0) => views[rng.gen_range(0..views.len())].clone(),
+                (false, 1) => {
+                    let src = &views[rng.gen_range(0..views.len())];
+                    src.iter().copied().filter(|_| rng.gen_bool(0.6)).collect()
+                }
+                _ => (0..n_elements).filter(|_| rng.gen_bool(density)).collect(),
+            };
+            views.push(view);
+        }
+        views
+    }
+
+    fn union(views: &[Vec<usize>]) -> Vec<usize> {
+        let mut all: Vec<usize> = views.iter().flatten().copied().collect();
+        all.sort_unstable();
+        all.dedup();
+        all
+    }
+
+    #[test]
+    fn universe_is_the_union_or_the_elements_seen_k_times() {
+        let views = vec![vec![0, 3, 70], vec![3, 4], vec![3, 70, 130], vec![]];
+        let one = CoverInstance::from_index_lists(&views, 1).unwrap();
+        assert_eq!(one.element_ids(), &[0, 3, 4, 70, 130]);
+        assert_eq!(one.view_ids(), &[0, 1, 2, 3]);
+        let two = CoverInstance::from_index_lists(&views, 2).unwrap();
+        assert_eq!(two.element_ids(), &[3, 70]);
+        assert_eq!(two.covered_by(2), vec![3, 70]);
+        assert_eq!(two.covered_by(1), vec![3]);
+        let three = CoverInstance::from_index_lists(&views, 3).unwrap();
+        assert_eq!(three.element_ids(), &[3]);
+        assert_eq!(CoverInstance::from_index_lists(&views, 0), Err(DifficultyError::ZeroMinViews));
+        // Bitsets of different lengths; bit i of word i/64.
+        let bits = vec![vec![1u64 << 5], vec![0, 1u64 << 1, 1u64 << 63]];
+        let b = CoverInstance::from_bitsets(&bits, 1).unwrap();
+        assert_eq!(b.element_ids(), &[5, 65, 191]);
+        assert!(b.is_cover(&[0, 1]) && !b.is_cover(&[1]) && !b.is_cover(&[0, 7]));
+    }
+
+    #[test]
+    fn empty_universe() {
+        let e = CoverInstance::from_bitsets(&[vec![0u64], vec![]], 1).unwrap();
+        assert_eq!(e.n_elements(), 0);
+        assert!(e.greedy().is_empty());
+        assert_eq!(e.brute_force().unwrap(), Vec::<usize>::new());
+        assert!(e.branch_and_bound(None).views.is_empty());
+        let red = e.reduce();
+        assert_eq!(red.empty_views, vec![0, 1]);
+        assert_eq!(red.reduced.n_views(), 0);
+        let none = CoverInstance::from_bitsets(&[], 1).unwrap();
+        assert!(none.is_cover(&[]) && none.greedy().is_empty());
+    }
+
+    #[test]
+    fn greedy_worst_case_picks_k_sets_where_two_suffice() {
+        // Elements in two rows R1, R2; blocks S_i (i = 1..k) of 2^i elements, half in each row.
+        // |R1| = |R2| = 2^k − 1 < 2^k = |S_k|, and after taking S_k, …, S_{i+1} the rows keep
+        // 2^i − 1 new elements against S_i's 2^i: greedy takes S_k, …, S_1 (k sets), optimum 2.
+        let k = 5;
+        let (mut r1, mut r2) = (Vec::new(), Vec::new());
+        let mut blocks = Vec::new();
+        let mut next = 0;
+        for i in 1..=k {
+            let half = 1usize << (i - 1);
+            let block: Vec<usize> = (next..next + 2 * half).collect();
+            r1.extend(&block[..half]);
+            r2.extend(&block[half..]);
+            next += 2 * half;
+            blocks.push(block);
+        }
+        let mut views = vec![r1, r2];
+        views.extend(blocks);
+        let instance = CoverInstance::from_index_lists(&views, 1).unwrap();
+        // View ids: R1 = 0, R2 = 1, S_i = i + 1.
+        assert_eq!(instance.greedy(), vec![6, 5, 4, 3, 2]);
+        assert_eq!(instance.brute_force().unwrap(), vec![0, 1]);
+        let bb = instance.branch_and_bound(None);
+        assert!(bb.optimal);
+        assert_eq!(bb.views.len(), 2);
+    }
+
+    #[test]
+    fn greedy_breaks_ties_to_the_lowest_view_id() {
+        let i = inst(&[&[0, 1], &[2, 3], &[0, 1], &[1, 2]]);
+        assert_eq!(i.greedy(), vec![0, 1]);
+        let j = inst(&[&[0], &[1, 2], &[3, 4], &[0, 1, 3]]);
+        // Gains: 1, 2, 2, 3 → view 3; then {2, 4}: views 1 and 2 tie at 1 → view 1, then view 2.
+        assert_eq!(j.greedy(), vec![3, 1, 2]);
+    }
+
+    #[test]
+    fn reductions_on_hand_made_instances() {
+        // View 1 ⊂ view 0; view 3 = view 2 (view 3 dropped, lower id stays); view 4 is empty.
+        let i = inst(&[&[0, 1, 2], &[1, 2], &[3, 4], &[3, 4], &[]]);
+        let red = i.reduce();
+        assert_eq!(red.dominated_views, vec![1, 3]);
+        assert_eq!(red.empty_views, vec![4]);
+        // Then every element has one view left: views 0 and 2 forced, nothing remains.
+        assert_eq!(red.forced, vec![0, 2]);
+        assert_eq!(red.elements_covered_by_forced, 5);
+        assert_eq!(red.reduced.n_elements(), 0);
+        assert_eq!(red.lift(&[]), vec![0, 2]);
+        // Dominated rows: element 0 is seen by {0, 1}, element 1 by {0, 1, 2} ⊇ → dropped;
+        // element 2 by {1, 2}, element 3 by {2, 0}: an odd cycle, nothing forced or dominated among
+        // 0, 2, 3 (pairwise incomparable) and views pairwise incomparable.
+        let cyc = inst(&[&[0, 1, 3], &[0, 1, 2], &[1, 2, 3]]);
+        let red = cyc.reduce();
+        assert_eq!(red.dominated_elements, 1);
+        assert_eq!(red.reduced.element_ids(), &[0, 2, 3]);
+        assert_eq!(red.reduced.view_ids(), &[0, 1, 2]);
+        assert!(red.forced.is_empty());
+        assert_eq!(red.reduced.brute_force().unwrap().len(), 2);
+        // Duplicate rows: the lower element id stays.
+        let dup = inst(&[&[5, 9], &[5, 9, 1], &[1]]);
+        let red = dup.reduce();
+        // Views: {5, 9} ⊂ {1, 5, 9} and {1} ⊂ it: both dominated, view 1 forced.
+        assert_eq!(red.dominated_views, vec![0, 2]);
+        assert_eq!(red.forced, vec![1]);
+        let rows_only = inst(&[&[5, 9, 2], &[5, 9, 3], &[2, 3]]);
+        let red = rows_only.reduce();
+        assert_eq!(red.reduced.element_ids(), &[2, 3, 5], "9 duplicates 5 and is dropped");
+    }
+
+    #[test]
+    fn reductions_preserve_the_optimum_on_random_instances() {
+        let mut rng = ChaCha8Rng::seed_from_u64(0x0b7e_c0de);
+        let mut reduced_something = 0;
+        for round in 0..300 {
+            let views = random_views(&mut rng);
+            let k = if round % 4 == 3 { 2 } else { 1 };
+            let instance = CoverInstance::from_index_lists(&views, k).unwrap();
+            // Universe by definition, independently.
+            let universe: Vec<usize> = union(&views)
+                .into_iter()
+                .filter(|e| views.iter().filter(|v| v.contains(e)).count() >= k)
+                .collect();
+            assert_eq!(instance.element_ids(), universe.as_slice(), "round {round}");
+            let opt = if universe.is_empty() { 0 } else { oracle_min(&views, &universe) };
+
+            let bf = instance.brute_force().unwrap();
+            assert_eq!(bf.len(), opt, "round {round}: brute force");
+            assert!(instance.is_cover(&bf));
+            let bb = instance.branch_and_bound(None);
+            assert!(bb.optimal);
+            assert_eq!(bb.views.len(), opt, "round {round}: branch and bound");
+            assert!(instance.is_cover(&bb.views));
+            let greedy = instance.greedy();
+            assert!(greedy.len() >= opt, "round {round}: greedy below optimum");
+            assert!(instance.is_cover(&greedy));
+
+            let red = instance.reduce();
+            let sub = red.reduced.brute_force().unwrap();
+            assert_eq!(red.forced.len() + sub.len(), opt, "round {round}: reductions changed the optimum");
+            let lifted = red.lift(&sub);
+            assert_eq!(lifted.len(), opt);
+            assert!(instance.is_cover(&lifted), "round {round}: lifted solution is not a cover");
+            // The fixpoint: no empty, dominated or forced column and no dominated row remain.
+            let r = &red.reduced;
+            let cols: Vec<Vec<usize>> = r.view_ids().iter().map(|&v| r.covered_by(v)).collect();
+            for (a, ca) in cols.iter().enumerate() {
+                assert!(!ca.is_empty(), "round {round}: empty column left");
+                for (b, cb) in cols.iter().enumerate() {
+                    assert!(a == b || !ca.iter().all(|e| cb.contains(e)), "round {round}: dominated column left");
+                }
+            }
+            let rows: Vec<Vec<usize>> = r
+                .element_ids()
+                .iter()
+                .map(|e| (0..cols.len()).filter(|&c| cols[c].contains(e)).collect())
+                .collect();
+            for (a, ra) in rows.iter().enumerate() {
+                assert!(ra.len() >= 2, "round {round}: forced column left");
+                for (b, rb) in rows.iter().enumerate() {
+                    assert!(a == b || !rb.iter().all(|c| ra.contains(c)), "round {round}: dominated row left");
+                }
+            }
+            if red.reduced.n_elements() < instance.n_elements() {
+                reduced_something += 1;
+            }
+        }
+        assert!(reduced_something > 100, "the random family exercises the reductions: {reduced_something}");
+    }
+
+    #[test]
+    fn branch_and_bound_beyond_brute_force_size() {
+        // 40 views on 120 elements: B&B must match the best of many greedy-free checks: it is a
+        // cover, not larger than greedy, and not smaller than the disjoint-elements bound.
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        for _ in 0..5 {
+            let views: Vec<Vec<usize>> =
+                (0..40).map(|_| (0..120).filter(|_| rng.gen_bool(0.08)).collect()).collect();
+            let instance = CoverInstance::from_index_lists(&views, 1).unwrap();
+            let bb = instance.branch_and_bound(None);
+            assert!(bb.optimal && instance.is_cover(&bb.views));
+            assert!(bb.views.len() <= instance.greedy().len());
+            // Reducing first gives the same optimum.
+            let red = instance.reduce();
+            let sub = red.reduced.branch_and_bound(None);
+            assert_eq!(red.forced.len() + sub.views.len(), bb.views.len());
+            assert!(instance.is_cover(&red.lift(&sub.views)));
+            // A node limit of 1 stops at the root with the greedy incumbent.
+            let stopped = instance.branch_and_bound(Some(1));
+            assert!(instance.is_cover(&stopped.views));
+            if !stopped.optimal {
+                assert_eq!(stopped.views.len(), instance.greedy().len());
+            }
+        }
+        let big = CoverInstance::from_index_lists(&vec![vec![0]; 25], 1).unwrap();
+        assert_eq!(big.brute_force(), Err(DifficultyError::TooManyViews { views: 25, max: 24 }));
+    }
+}

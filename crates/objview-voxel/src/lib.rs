@@ -17,6 +17,7 @@ pub use error::VoxelError;
 pub use key::{center_of, key_of, VoxelKey, DEFAULT_RESOLUTION};
 pub use set::VoxelSet;
 pub use visibility::{
-    bitset_count, bitset_to_indices, observed_voxels, observed_voxels_mesh, pixel_ray_direction, to_bitset,
-    union, union_bitsets, union_into, InverseCaster, Visibility, VisibilityMode, DEFAULT_MAX_RANGE,
+    bitset_count, bitset_to_indices, coverage_counts, observed_voxels, observed_voxels_mesh,
+    pixel_ray_direction, to_bitset, union, union_bitsets, union_into, InverseCaster, Visibility,
+    VisibilityMode, DEFAULT_MAX_RANGE,
 };

@@ -748,6 +748,18 @@ pub fn union_bitsets(sets: &[Vec<u64>], len: usize) -> Vec<u64> {
     acc
 }
 
+/// For each of `len` voxels, the number of bitsets (views) containing it — for the SPEC §4
+/// option of keeping only voxels seen by at least k views.
+pub fn coverage_counts(sets: &[Vec<u64>], len: usize) -> Vec<u32> {
+    let mut counts = vec![0u32; len];
+    for s in sets {
+        for i in bitset_to_indices(s) {
+            counts[i as usize] += 1;
+        }
+    }
+    counts
+}
+
 /// Number of set bits.
 pub fn bitset_count(bits: &[u64]) -> usize {
     bits.iter().map(|w| w.count_ones() as usize).sum()
@@ -795,6 +807,8 @@ mod tests {
         let u = union_bitsets(&[b, c], 131);
         assert_eq!(bitset_to_indices(&u), vec![0, 1, 5, 63, 64, 129, 130]);
         assert_eq!(union(&[vec![3, 1], vec![2, 3]]), vec![1, 2, 3]);
+        let cov = coverage_counts(&[to_bitset(&[0, 2], 4), to_bitset(&[2, 3], 4), to_bitset(&[2], 4)], 4);
+        assert_eq!(cov, vec![1, 0, 3, 1]);
     }
 
     /// Brute-force Chebyshev distances on a small grid.

@@ -4,8 +4,10 @@
 //! grid-based r_vis), so it is defined once here.
 
 /// View-set sizes N of the saturation curve, strictly increasing (SPEC §4).
-pub const SATURATION_GRID: [usize; 26] =
-    [6, 8, 10, 12, 14, 16, 20, 24, 28, 32, 40, 48, 56, 64, 80, 96, 112, 128, 144, 160, 180, 200, 270, 360, 432, 492];
+pub const SATURATION_GRID: [usize; 26] = [
+    6, 8, 10, 12, 14, 16, 20, 24, 28, 32, 40, 48, 56, 64, 80, 96, 112, 128, 144, 160, 180, 200, 270, 360,
+    432, 492,
+];
 
 /// Smallest grid size N_min.
 pub const SATURATION_N_MIN: usize = SATURATION_GRID[0];

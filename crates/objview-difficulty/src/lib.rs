@@ -5,7 +5,7 @@
 //!
 //! - [`grid`]: the saturation grid of view-set sizes N.
 //! - [`normal`]: the standard normal density φ, CDF Φ and inverse Φ⁻¹ to near machine precision.
-//! - [`saturation`]: running maximum, lognormal-CDF fit, saturation point N*, d_sat and r_vis.
+//! - [`mod@saturation`]: running maximum, lognormal-CDF fit, saturation point N*, d_sat and r_vis.
 //! - [`setcover`]: the combinatorial part of d_plan: cover instances from per-view bitsets,
 //!   optimum-preserving reductions, the deterministic greedy cover and exact solvers for small
 //!   instances (the test oracle for the ILP).

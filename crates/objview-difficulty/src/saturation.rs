@@ -339,6 +339,9 @@ pub fn saturation(
     })
 }
 
+// Reference values keep the 18 digits printed from 50-digit arithmetic; the compiler rounds them
+// to the nearest f64, which is the point of quoting them in full.
+#[allow(clippy::excessive_precision)]
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -532,7 +535,10 @@ mod tests {
         let zero = [CurvePoint::new(6, 0.0), CurvePoint::new(8, 0.0)];
         assert_eq!(saturation(&zero, 10, &st), Err(DifficultyError::NothingObserved));
         let unsorted = [CurvePoint::new(8, 1.0), CurvePoint::new(8, 2.0)];
-        assert!(matches!(saturation(&unsorted, 10, &st), Err(DifficultyError::NonIncreasingN { index: 1, .. })));
+        assert!(matches!(
+            saturation(&unsorted, 10, &st),
+            Err(DifficultyError::NonIncreasingN { index: 1, .. })
+        ));
         let n0 = [CurvePoint::new(0, 1.0), CurvePoint::new(8, 2.0)];
         assert_eq!(saturation(&n0, 10, &st), Err(DifficultyError::ZeroViewCount { index: 0 }));
         for y in [f64::NAN, -1.0, f64::INFINITY] {
@@ -589,6 +595,12 @@ mod tests {
         // 460, whose probes stop at 480 ([480, 490]).
         assert!(!jump.plateau_holds(470.0, 492.0, 1_000, &st));
         assert!(jump.plateau_holds(460.0, 492.0, 1_000, &st));
+        // The cap itself: a jump at 503 (σ = 1e-4: Ŷ(500) and Ŷ(502) are ~0) is only reachable from
+        // the probes 495 and 500, which lie beyond N_max = 492 when N = 480.
+        let beyond = LognormalFit { mu: 503f64.ln(), sigma: 1e-4, y_max: 1_000.0, degenerate: false };
+        assert!(beyond.plateau_holds(480.0, 492.0, 1_000, &st));
+        assert!(beyond.plateau_holds(492.0, 492.0, 1_000, &st));
+        assert!(!beyond.plateau_holds(480.0, 600.0, 1_000, &st), "uncapped, probe 495 sees the jump");
         // With plateau_tol = 0 a strictly increasing fit never plateaus.
         let exact = exact_lognormal_curve(1.0, 1_000.0).1;
         let strict = SaturationSettings { plateau_tol: 0.0, ..st };
@@ -620,7 +632,11 @@ mod tests {
             let fit = LognormalFit { mu: sat.mu, sigma: sat.sigma, y_max: sat.y_max, degenerate: false };
             let (scan, monotone) = scan_first_plateau(&fit, 492.0, s_gt, step);
             assert!(monotone, "{name}: predicate not monotone on the scan");
-            assert!(sat.n_star <= scan + 1e-9 && sat.n_star > scan - step - 1e-9, "{name}: {} vs {scan}", sat.n_star);
+            assert!(
+                sat.n_star <= scan + 1e-9 && sat.n_star > scan - step - 1e-9,
+                "{name}: {} vs {scan}",
+                sat.n_star
+            );
             // Bisection converged to the switch: holds at N*, fails just below.
             if sat.n_star > 6.0 && sat.n_star < 492.0 {
                 assert!(fit.plateau_holds(sat.n_star, 492.0, s_gt, &settings()), "{name}");
@@ -662,8 +678,20 @@ mod tests {
         let sat = saturation(&curve, 1_000, &settings()).unwrap();
         let json = serde_json::to_value(&sat).unwrap();
         for key in [
-            "curve", "running_max", "mu", "sigma", "y_max", "n_star", "d_sat", "r_vis", "grid_n",
-            "grid_r_vis", "slow_saturation", "degenerate_fit", "s_gt", "settings",
+            "curve",
+            "running_max",
+            "mu",
+            "sigma",
+            "y_max",
+            "n_star",
+            "d_sat",
+            "r_vis",
+            "grid_n",
+            "grid_r_vis",
+            "slow_saturation",
+            "degenerate_fit",
+            "s_gt",
+            "settings",
         ] {
             assert!(json.get(key).is_some(), "missing {key}");
         }

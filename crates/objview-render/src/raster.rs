@@ -281,9 +281,8 @@ fn resolve(zb: &mut ZBuf, camera: &Camera, frame: &mut Frame, parallel: bool) {
             let key = *z;
             *z = EMPTY;
             *d = key_depth(key);
-            if key == EMPTY {
-                *t = NO_HIT;
-            }
+            // Branch-free (vectorizes): ids are stale where nothing was drawn.
+            *t = if key == EMPTY { NO_HIT } else { *t };
         }
     };
     if parallel {
@@ -432,41 +431,68 @@ fn span_scalar(
     }
 }
 
-/// [`span_scalar`] with AVX2, branch-free: the same multiplications, additions and ordered
-/// comparisons, an unsigned key comparison and masked stores, so the same result.
+/// The rows of one triangle's box, LANES pixels at a time, branch-free: the same
+/// multiplications, additions and ordered comparisons per pixel as [`span_scalar`] (so the
+/// same result), an unsigned key comparison (sign-flip trick) and masked stores.
+/// Caller guarantees: AVX2; x0 ≤ x1 < width, y0 ≤ y1 < height; z-buffers of at least (y1 + 1)·width + LANES entries and a px table padded by LANES.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[inline]
-unsafe fn span_avx2(
+#[allow(clippy::too_many_arguments)]
+unsafe fn draw_rows_avx2(
     k: &RowConst,
-    px: &[f32; LANES],
-    keys: &mut [u32; LANES],
-    ids: &mut [u32; LANES],
-    rem: usize,
+    b: [f32; 3],
+    c: [f32; 3],
+    [n1, n2]: [f32; 2],
+    s: &Setup,
+    zb: &mut ZBuf,
+    [x0, x1, y0, y1]: [usize; 4],
     id: u32,
 ) {
     use std::arch::x86_64::*;
-    let x = _mm256_loadu_ps(px.as_ptr());
+    let wu = s.px.len() - LANES;
+    let (a0, a1, a2) = (_mm256_set1_ps(k.a[0]), _mm256_set1_ps(k.a[1]), _mm256_set1_ps(k.a[2]));
+    let (n0, inv_d) = (_mm256_set1_ps(k.n0), _mm256_set1_ps(k.inv_d));
+    let (wmin, wmax) = (_mm256_set1_ps(k.wmin), _mm256_set1_ps(k.wmax));
     let zero = _mm256_setzero_ps();
-    let lin = |a: f32, r: f32| _mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(a), x), _mm256_set1_ps(r));
-    let m0 = _mm256_cmp_ps::<_CMP_GE_OQ>(lin(k.a[0], k.r[0]), zero);
-    let m1 = _mm256_cmp_ps::<_CMP_GE_OQ>(lin(k.a[1], k.r[1]), zero);
-    let m2 = _mm256_cmp_ps::<_CMP_GE_OQ>(lin(k.a[2], k.r[2]), zero);
-    let w = _mm256_mul_ps(lin(k.n0, k.rw), _mm256_set1_ps(k.inv_d));
-    let m3 = _mm256_cmp_ps::<_CMP_GE_OQ>(w, _mm256_set1_ps(k.wmin));
-    let m4 = _mm256_cmp_ps::<_CMP_LE_OQ>(w, _mm256_set1_ps(k.wmax));
-    let cover =
-        _mm256_castps_si256(_mm256_and_ps(_mm256_and_ps(_mm256_and_ps(m0, m1), _mm256_and_ps(m2, m3)), m4));
-    // key = u32::MAX − bits(w); unsigned key < old via the sign-flip trick.
-    let key = _mm256_sub_epi32(_mm256_set1_epi32(-1), _mm256_castps_si256(w));
-    let old = _mm256_loadu_si256(keys.as_ptr() as *const __m256i);
+    let ones = _mm256_set1_epi32(-1);
     let sign = _mm256_set1_epi32(i32::MIN);
-    let nearer = _mm256_cmpgt_epi32(_mm256_xor_si256(old, sign), _mm256_xor_si256(key, sign));
-    let in_span =
-        _mm256_cmpgt_epi32(_mm256_set1_epi32(rem as i32), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
-    let m = _mm256_and_si256(_mm256_and_si256(cover, nearer), in_span);
-    _mm256_maskstore_epi32(keys.as_mut_ptr() as *mut i32, m, key);
-    _mm256_maskstore_epi32(ids.as_mut_ptr() as *mut i32, m, _mm256_set1_epi32(id as i32));
+    let iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    let idv = _mm256_set1_epi32(id as i32);
+    let px = s.px.as_ptr();
+    let kp = zb.key.as_mut_ptr();
+    let ip = zb.id.as_mut_ptr();
+    for v in y0..=y1 {
+        let py = *s.py.get_unchecked(v);
+        // Same scalar row constants as the portable path.
+        let (r0, r1, r2) = (b[0] * py + c[0], b[1] * py + c[1], b[2] * py + c[2]);
+        let rw = n1 * py + n2;
+        let (r0, r1, r2, rw) =
+            (_mm256_set1_ps(r0), _mm256_set1_ps(r1), _mm256_set1_ps(r2), _mm256_set1_ps(rw));
+        let mut u = x0;
+        while u <= x1 {
+            let x = _mm256_loadu_ps(px.add(u));
+            let m0 = _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_add_ps(_mm256_mul_ps(a0, x), r0), zero);
+            let m1 = _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_add_ps(_mm256_mul_ps(a1, x), r1), zero);
+            let m2 = _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_add_ps(_mm256_mul_ps(a2, x), r2), zero);
+            let w = _mm256_mul_ps(_mm256_add_ps(_mm256_mul_ps(n0, x), rw), inv_d);
+            let m3 = _mm256_cmp_ps::<_CMP_GE_OQ>(w, wmin);
+            let m4 = _mm256_cmp_ps::<_CMP_LE_OQ>(w, wmax);
+            let cover = _mm256_castps_si256(_mm256_and_ps(
+                _mm256_and_ps(_mm256_and_ps(m0, m1), _mm256_and_ps(m2, m3)),
+                m4,
+            ));
+            let key = _mm256_sub_epi32(ones, _mm256_castps_si256(w));
+            let at = v * wu + u;
+            let old = _mm256_loadu_si256(kp.add(at) as *const __m256i);
+            let nearer = _mm256_cmpgt_epi32(_mm256_xor_si256(old, sign), _mm256_xor_si256(key, sign));
+            let in_span = _mm256_cmpgt_epi32(_mm256_set1_epi32((x1 + 1 - u) as i32), iota);
+            let m = _mm256_and_si256(_mm256_and_si256(cover, nearer), in_span);
+            _mm256_maskstore_epi32(kp.add(at) as *mut i32, m, key);
+            _mm256_maskstore_epi32(ip.add(at) as *mut i32, m, idv);
+            u += LANES;
+        }
+    }
 }
 
 /// Loads the corners of triangles `t0 .. t0 + BATCH` (all in range) into `p` with AVX2
@@ -624,6 +650,10 @@ fn raster_range_impl<const AVX: bool>(s: &Setup, lo: usize, hi: usize, zb: &mut 
     let wmin = (1.0 / k.zfar) as f32;
     let wmax = (1.0 / k.znear) as f32;
     let wu = w as usize;
+    // The unchecked AVX2 row loop relies on these (see draw_rows_avx2).
+    let n = wu * h as usize;
+    assert!(zb.key.len() >= n + LANES && zb.id.len() >= n + LANES);
+    assert!(s.px.len() >= wu + LANES && s.py.len() >= h as usize);
     let mut batch = Batch {
         flag: [SKIP; BATCH],
         bbox: [[0; BATCH]; 4],
@@ -677,6 +707,15 @@ fn raster_range_impl<const AVX: bool>(s: &Setup, lo: usize, hi: usize, zb: &mut 
             }
             let n = [batch.n[0][j], batch.n[1][j], batch.n[2][j]];
             let mut rc = RowConst { a, r: [0.0; 3], n0: n[0], rw: 0.0, inv_d: batch.inv_d[j], wmin, wmax };
+            #[cfg(target_arch = "x86_64")]
+            if AVX {
+                debug_assert!(x0 <= x1 && x1 < wu && y0 <= y1 && y1 < h as usize);
+                // SAFETY: AVX is only true in the avx2-enabled build; buffer sizes are checked
+                // on entry, and every box is clamped to the image (x1 < w and y1 < h: the
+                // `.min(w − 1)` / `.min(wf − 1)` clamps above and in setup_batch).
+                unsafe { draw_rows_avx2(&rc, b, c, [n[1], n[2]], s, zb, [x0, x1, y0, y1], id) };
+                continue;
+            }
             for v in y0..=y1 {
                 let py = s.py[v];
                 rc.r = [b[0] * py + c[0], b[1] * py + c[1], b[2] * py + c[2]];
@@ -693,13 +732,6 @@ fn raster_range_impl<const AVX: bool>(s: &Setup, lo: usize, hi: usize, zb: &mut 
                     let ids: &mut [u32; LANES] =
                         (&mut zb.id[off + u..off + u + LANES]).try_into().expect("padded buffer");
                     let rem = (x1 + 1 - u).min(LANES);
-                    #[cfg(target_arch = "x86_64")]
-                    if AVX {
-                        // SAFETY: AVX is only true in the avx2-enabled build.
-                        unsafe { span_avx2(&rc, pxs, keys, ids, rem, id) };
-                        u += LANES;
-                        continue;
-                    }
                     span_scalar(&rc, pxs, keys, ids, rem, id);
                     u += LANES;
                 }

@@ -73,9 +73,10 @@ fn bench_render(a: RenderArgs) -> Result<()> {
         a.repeats,
         rayon::current_num_threads()
     );
-    match &peer {
-        Some(v) => println!("peer: Open3D {v} RaycastingScene (Embree), same mesh and poses"),
-        None => println!("peer: Open3D not installed (pip install open3d) — no ratio printed"),
+    match (&peer, a.no_peer) {
+        (Some(v), _) => println!("peer: Open3D {v} RaycastingScene (Embree), same mesh and poses"),
+        (None, true) => println!("peer: skipped (--no-peer)"),
+        (None, false) => println!("peer: Open3D not importable by {} (pip install open3d) — no ratio", a.python),
     }
     println!(
         "{:>10} {:>12} {:>12} {:>12} {:>10} {:>12} {:>9}",

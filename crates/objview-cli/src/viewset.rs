@@ -34,14 +34,9 @@ pub fn run(cmd: Command) -> Result<()> {
             }
             let set = tammes::generate(n, seed);
             let angle = set.min_angle_deg().unwrap_or(f64::NAN);
-            let mut header = vec![
-                format!("tammes-{n}: objview viewset generate {n} --seed {seed}"),
-                format!("generator: {} (objview {})", tammes::OPTIMIZER_VERSION, env!("CARGO_PKG_VERSION")),
-                format!("min_angle_deg: {angle:.6}"),
-            ];
-            if let Some(b) = tammes::best_known_deg(n) {
-                header.push(format!("best_known_deg: {b:.6} (ratio {:.5})", angle / b));
-            }
+            // The same header as the shipped data/viewsets files, so a regenerated set
+            // is byte-identical to the shipped one.
+            let header = tammes::file_header(&set, seed);
             match out {
                 Some(p) => {
                     set.write(&p, &header)?;

@@ -49,6 +49,7 @@ use crate::{Camera, Frame, NO_HIT};
 use objview_geom::Mesh;
 use rayon::prelude::*;
 
+pub static STATS: [std::sync::atomic::AtomicUsize; 40] = [const { std::sync::atomic::AtomicUsize::new(0) }; 40];
 /// Depth key of a pixel nothing has been drawn to.
 const EMPTY: u32 = u32::MAX;
 
@@ -218,6 +219,10 @@ impl Renderer {
             }
         }
         resolve(&mut bufs[0], camera, frame, parallel);
+        if std::env::var_os("RSTATS").is_some() {
+            let v: Vec<usize> = STATS.iter().map(|x| x.swap(0, std::sync::atomic::Ordering::Relaxed)).collect();
+            eprintln!("drawn {} w {:?} h {:?} cov {:?} rows {} spans {} precise {}", v[0], &v[1..11], &v[11..21], &v[21..31], v[31], v[32], v[33]);
+        }
         self.zbufs = bufs;
     }
 
@@ -701,6 +706,23 @@ fn raster_range_impl<const AVX: bool>(s: &Setup, lo: usize, hi: usize, zb: &mut 
             let c = [batch.c[0][j], batch.c[1][j], batch.c[2][j]];
             let id = t as u32;
             let [x0, x1, y0, y1] = bb.map(|x| x as usize);
+            {
+                use std::sync::atomic::Ordering::Relaxed;
+                let wdt = x1 - x0 + 1; let hgt = y1 - y0 + 1;
+                STATS[0].fetch_add(1, Relaxed);
+                STATS[1 + wdt.min(9)].fetch_add(1, Relaxed);
+                STATS[11 + hgt.min(9)].fetch_add(1, Relaxed);
+                let mut cov = 0;
+                for v in y0..=y1 { for u in x0..=x1 {
+                    let py = s.py[v]; let px = s.px[u];
+                    let ok = (0..3).all(|q| a[q] * px + (b[q] * py + c[q]) >= 0.0);
+                    if ok { cov += 1; }
+                }}
+                STATS[21 + cov.min(9)].fetch_add(1, Relaxed);
+                STATS[31].fetch_add(hgt, Relaxed);
+                STATS[32].fetch_add(wdt.div_ceil(8) * hgt, Relaxed);
+                if flag == PRECISE { STATS[33].fetch_add(1, Relaxed); }
+            }
             if flag == PRECISE {
                 draw_precise(s, s.tris[t], [a, b, c], id, [x0, x1, y0, y1], zb);
                 continue;

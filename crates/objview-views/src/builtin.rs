@@ -29,6 +29,8 @@ pub const SHIPPED_TAMMES: &[(usize, &str)] = &[
     (200, include_str!("../../../data/viewsets/tammes-200.txt")),
     (270, include_str!("../../../data/viewsets/tammes-270.txt")),
     (360, include_str!("../../../data/viewsets/tammes-360.txt")),
+    (432, include_str!("../../../data/viewsets/tammes-432.txt")),
+    (492, include_str!("../../../data/viewsets/tammes-492.txt")),
 ];
 
 /// The shipped sizes N, increasing.

@@ -60,11 +60,8 @@ fn bench_render(a: RenderArgs) -> Result<()> {
     let obj = synth::find(&a.object).with_context(|| {
         format!("--object: no built-in object named {:?} (see `objview objects list`)", a.object)
     })?;
-    let poses: Vec<Pose> = ViewSet::resolve("tammes-128")?
-        .poses(VIEW_RADIUS)
-        .into_iter()
-        .take(a.poses.max(1))
-        .collect();
+    let poses: Vec<Pose> =
+        ViewSet::resolve("tammes-128")?.poses(VIEW_RADIUS).into_iter().take(a.poses.max(1)).collect();
     let peer = if a.no_peer { None } else { open3d_available(&a.python) };
     println!(
         "objview bench render: object={} poses={} repeats={} image=512x512 threads={}",
@@ -76,7 +73,9 @@ fn bench_render(a: RenderArgs) -> Result<()> {
     match (&peer, a.no_peer) {
         (Some(v), _) => println!("peer: Open3D {v} RaycastingScene (Embree), same mesh and poses"),
         (None, true) => println!("peer: skipped (--no-peer)"),
-        (None, false) => println!("peer: Open3D not importable by {} (pip install open3d) — no ratio", a.python),
+        (None, false) => {
+            println!("peer: Open3D not importable by {} (pip install open3d) — no ratio", a.python)
+        }
     }
     println!(
         "{:>10} {:>12} {:>12} {:>12} {:>10} {:>12} {:>9}",
@@ -101,7 +100,11 @@ fn bench_render(a: RenderArgs) -> Result<()> {
             peer_ms.map_or("-".into(), |p| format!("{p:.3}")),
             ratio.map_or("-".into(), |x| format!("{x:.2}x")),
         );
-        anyhow::ensure!(r.identical, "single-thread and parallel renders differ on {} triangles", r.triangles);
+        anyhow::ensure!(
+            r.identical,
+            "single-thread and parallel renders differ on {} triangles",
+            r.triangles
+        );
         rows.push(json!({"render": r, "open3d_median_ms": peer_ms, "speedup_vs_open3d": ratio}));
     }
     if let Some(ratio_note) = peer.as_ref().map(|_| "ratio = Open3D median / objview single-thread median") {

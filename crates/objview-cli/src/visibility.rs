@@ -46,11 +46,8 @@ pub fn run(a: Args) -> Result<()> {
     let gt = crate::common::ground_truth(&mesh, &transform, a.gt_cloud.as_deref())?;
     let views = ViewSet::resolve(&a.views)?;
     let set = VoxelSet::from_points(&gt.points, a.resolution)?;
-    let cameras: Vec<Camera> = views
-        .poses(VIEW_RADIUS_DEFAULT)
-        .into_iter()
-        .map(|p| Camera::new(p, Intrinsics::default()))
-        .collect();
+    let cameras: Vec<Camera> =
+        views.poses(VIEW_RADIUS_DEFAULT).into_iter().map(|p| Camera::new(p, Intrinsics::default())).collect();
     let vis = Visibility::new(&set, &mesh, a.mode);
     let per_view = vis.observe_all(&cameras);
     let union = objview_voxel::union(&per_view);

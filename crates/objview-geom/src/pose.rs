@@ -57,7 +57,9 @@ impl Pose {
         }
         let p = Pose::from_array(a).ok_or_else(|| "pose numbers must be finite".to_string())?;
         if p.center == p.look_at {
-            return Err("the camera centre equals the look-at point: the pose has no viewing direction".into());
+            return Err(
+                "the camera centre equals the look-at point: the pose has no viewing direction".into()
+            );
         }
         Ok(p)
     }

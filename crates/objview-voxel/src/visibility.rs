@@ -26,19 +26,26 @@
 //! - An axis with `d = 0` (exactly) never steps.
 //!
 //! Speed (all exact: the walk's result never changes, only the work to get it):
-//! - a per-view depth bound: for 8×8-pixel tiles, the smallest distance at which any voxel box
-//!   projecting into the tile can be entered; a ray starts its walk there (after all plane
-//!   crossings strictly before it) instead of at the camera;
+//! - one ray per *pixel*, not per voxel: voxels whose centres fall in the same pixel cast the
+//!   same ray and add the same voxel (a per-view pixel mask, one `u64` per 8×8 tile; rays are
+//!   cast tile by tile, which also keeps consecutive walks in the same part of the grid);
+//! - a per-view depth bound: for 4×4-pixel cells, a distance below which no voxel box whose
+//!   conservative projected footprint reaches the cell can be entered; a ray starts its walk
+//!   there (after all plane crossings strictly before it) instead of at the camera;
 //! - otherwise the walk starts where the ray enters the set's grid box (the box has an empty
 //!   one-voxel margin and nothing of S_gt lies outside it);
 //! - it leaps over empty space with a Chebyshev distance field (a cell at distance D has an
 //!   empty `(2D−1)³` neighbourhood): the leap goes to the last cell before the ray leaves that
 //!   empty cube, and the walk resumes there with the crossings at the exit instant still to
 //!   do, so the tie order is kept;
+//! - the walk of a ray with no zero direction component runs in mirrored coordinates in which
+//!   every axis steps up (bit-identical crossing times; see `InverseCaster::cast`), with one
+//!   range test per step;
 //! - `f64::floor` is avoided in hot paths (it is a libm call on baseline x86-64).
 //!
-//! On a 100k-triangle object (17 354 voxels, 128 views) `inverse` takes ≈1.9–2.3 ms per view on
-//! one core of a loaded 2-core Xeon (`examples/bench_visibility.rs`).
+//! On the `objview bench render` object (built-in `mug`, 98 128 triangles, |S_gt| = 32 043, 16
+//! views of tammes-128) `inverse` costs ≈18 M instructions per view on one core
+//! (`examples/inverse_views.rs` under callgrind; ≈38 M with one full walk per voxel).
 
 use crate::key::{center_of, key_of};
 use crate::set::VoxelSet;
@@ -54,7 +61,7 @@ pub const DEFAULT_MAX_RANGE: f64 = 6.0;
 /// Distance-field cap: cells farther than this from S_gt store `FIELD_CAP + 1`.
 const FIELD_CAP: u8 = 30;
 /// Smallest stored distance at which the walk leaps instead of stepping.
-const LEAP_MIN: u8 = 3;
+const LEAP_MIN: u8 = 4;
 /// Leaps over cubes of at most this Chebyshev radius advance crossing by crossing.
 const SMALL_LEAP: usize = 2;
 
@@ -117,9 +124,43 @@ pub struct InverseCaster<'a> {
     max_range: f64,
 }
 
-/// Per-view constants: plane offsets `k·r − o` for every grid plane, per axis.
+/// Outcome of [`InverseCaster::cast`].
+enum Cast {
+    /// The bitmap bit position of the first S_gt voxel entered.
+    Hit(usize),
+    /// No S_gt voxel is entered within range.
+    Miss,
+    /// Not handled by the fast walk: use [`InverseCaster::first_hit_cell`].
+    General,
+}
+
+/// Per-view constants of [`InverseCaster::cast`] for one octant of ray directions (which axes
+/// the ray moves down, walked in mirrored coordinates h = n − 1 − g).
+struct Octant<'v> {
+    /// Per axis, the plane offsets in walk order: [`ViewPlanes`]' `planes` or `mirror`.
+    pl: [&'v [f64]; 3],
+    /// Per axis, the first and last of those planes (the grid box).
+    box0: [f64; 3],
+    box1: [f64; 3],
+    /// `next_up(max_range)`: a crossing at or after it is out of range.
+    past_range: f64,
+    /// Field index of walk cell h: `fbase + Σ h[a]·fstep[a]` (wrapping, so that a negative
+    /// step is a two's-complement one).
+    fstep: [usize; 3],
+    fbase: usize,
+    /// Bitmap bit position of walk cell h, likewise.
+    bstep: [usize; 3],
+    bbase: usize,
+}
+
+/// Per-view constants: plane offsets `k·r − o` for every grid plane, per axis, and the same
+/// planes mirrored (`mirror[a][j] = −planes[a][n − j]`), which let a ray moving down an axis
+/// be walked as one moving up (see [`InverseCaster::cast`]).
 struct ViewPlanes {
     planes: [Vec<f64>; 3],
+    mirror: [Vec<f64>; 3],
+    /// 1/r, for start-cell guesses.
+    inv_r: f64,
 }
 
 impl<'a> InverseCaster<'a> {
@@ -150,9 +191,10 @@ impl<'a> InverseCaster<'a> {
         let r = self.set.resolution();
         let g0 = self.set.grid_origin();
         let planes = std::array::from_fn(|a| {
-            (0..=self.dims[a]).map(|g| (g0[a] as f64 + g as f64) * r - origin[a]).collect()
+            (0..=self.dims[a]).map(|g| (g0[a] as f64 + g as f64) * r - origin[a]).collect::<Vec<f64>>()
         });
-        ViewPlanes { planes }
+        let mirror = std::array::from_fn(|a| planes[a].iter().rev().map(|&p| -p).collect());
+        ViewPlanes { planes, mirror, inv_r: 1.0 / r }
     }
 
     /// Index (into the set) of the first S_gt voxel entered by the ray `origin + t·dir`,
@@ -184,10 +226,13 @@ impl<'a> InverseCaster<'a> {
     /// `len.div_ceil(64)` words).
     ///
     /// Same set as [`InverseCaster::observe_walk_into`] (tested against it and a brute force),
-    /// faster: a first pass builds a coarse per-view depth bound — for 8×8-pixel tiles, the
-    /// smallest distance at which any voxel box whose projection reaches the tile can be
-    /// entered (`|centre − camera| − r·√3/2`, from an exact bound on the projected bounding
-    /// sphere) — and every ray starts its walk at its tile's bound instead of at the grid box,
+    /// faster. A first pass over the voxels projects each centre, marks its pixel in a per-view
+    /// pixel mask (one `u64` per 8×8-pixel tile) and builds a coarse depth bound: for each
+    /// 4×4-pixel cell, a distance below which no voxel box whose projection can reach the cell
+    /// is entered (`|centre − camera| − r·√3/2` over a conservative footprint of the projected
+    /// bounding sphere). The second pass casts one ray per *marked pixel*, tile by tile: voxels
+    /// projecting to the same pixel cast the same ray and add the same voxel, so one walk
+    /// answers them all; every walk starts at its cell's bound instead of at the grid box,
     /// which skips the empty space in front of the object in O(1).
     pub fn observe_into(&self, camera: &Camera, bits: &mut [u64]) {
         let set = self.set;
@@ -196,47 +241,184 @@ impl<'a> InverseCaster<'a> {
         }
         assert!(bits.len() >= set.len().div_ceil(64), "bitset too short");
         let vp = self.planes(camera.center);
-        let r = set.resolution();
         let k = &camera.intrinsics;
         let (tw, th) = ((k.width as usize).div_ceil(TILE), (k.height as usize).div_ceil(TILE));
-        let mut tile_min = vec![f64::INFINITY; tw * th];
-        let mut global_min = f64::INFINITY;
-        let mut pixels: Vec<(u32, u32, u32)> = Vec::with_capacity(set.len());
-        let rho = 0.5 * 3f64.sqrt() * r; // circumradius of a voxel box
-        for (i, key) in set.keys().iter().enumerate() {
-            let c = center_of(*key, r);
-            let pc = camera.to_camera(c);
-            if let Some((u, v)) = pixel_of(k, pc) {
-                pixels.push((i as u32, u, v));
+        let (cw, ch) = ((k.width as usize).div_ceil(CELL), (k.height as usize).div_ceil(CELL));
+        let mut cell_min = vec![f64::INFINITY; cw * ch];
+        // Bit (v % 8)·8 + u % 8 of word (v / 8)·tw + u / 8: pixel (u, v) is some voxel's pixel.
+        let mut mask = vec![0u64; tw * th];
+        let global_min = self.project_voxels(camera, &mut cell_min, &mut mask);
+        let qu: Vec<f64> = (0..k.width).map(|u| k.pixel_ray(u, 0)[0]).collect();
+        let qv: Vec<f64> = (0..k.height).map(|v| k.pixel_ray(0, v)[1]).collect();
+        let (cr, cd, cf) = (camera.right, camera.down, camera.forward);
+        let octants: [Octant<'_>; 8] = std::array::from_fn(|m| self.octant(&vp, m));
+        for (t, &m) in mask.iter().enumerate() {
+            if m == 0 {
+                continue;
             }
-            let dist = (pc[0] * pc[0] + pc[1] * pc[1] + pc[2] * pc[2]).sqrt();
-            let near = dist - rho;
-            let near = near - 1e-9 * near.abs() - 1e-12;
-            match footprint(k, pc, rho) {
-                Some((u0, u1, v0, v1)) => {
-                    // Truncation instead of floor: it only differs below 0, where the
-                    // clamp (or an extra, harmless tile) absorbs it.
-                    let tu0 = (((u0 - 0.5) / TILE as f64) as i32).max(0);
-                    let tu1 = (((u1 - 0.5) / TILE as f64) as i32).min(tw as i32 - 1);
-                    let tv0 = (((v0 - 0.5) / TILE as f64) as i32).max(0);
-                    let tv1 = (((v1 - 0.5) / TILE as f64) as i32).min(th as i32 - 1);
-                    for tv in tv0..=tv1 {
-                        for tu in tu0..=tu1 {
-                            let m = &mut tile_min[tv as usize * tw + tu as usize];
-                            *m = m.min(near);
-                        }
-                    }
-                }
-                None => global_min = global_min.min(near),
-            }
-        }
-        for (_, u, v) in pixels {
-            let t_lo = tile_min[(v as usize / TILE) * tw + u as usize / TILE].min(global_min);
-            let d = pixel_ray_direction(camera, u, v);
-            if let Some(g) = self.first_hit_cell(&vp, d, t_lo) {
-                let i = set.index_of_bit(set.bit_of_cell(g)) as usize;
+            let (u0, v0) = ((t % tw) * TILE, (t / tw) * TILE);
+            let mut m = m;
+            while m != 0 {
+                let b = m.trailing_zeros() as usize;
+                m &= m - 1;
+                let (u, v) = (u0 + b % TILE, v0 + b / TILE);
+                let t_lo = fmin(cell_min[(v / CELL) * cw + u / CELL], global_min);
+                // `pixel_ray_direction` with the per-pixel divisions tabulated (same values).
+                let (a, c) = (qu[u], qv[v]);
+                let q: [f64; 3] = std::array::from_fn(|i| a * cr[i] + c * cd[i] + cf[i]);
+                let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt();
+                let d = [q[0] / n, q[1] / n, q[2] / n];
+                let moving = |x: f64| x != 0.0 && !x.is_nan();
+                let cast = if moving(d[0]) && moving(d[1]) && moving(d[2]) {
+                    let o =
+                        (d[0] < 0.0) as usize | ((d[1] < 0.0) as usize) << 1 | ((d[2] < 0.0) as usize) << 2;
+                    self.cast(&octants[o], d, t_lo, vp.inv_r)
+                } else {
+                    Cast::General
+                };
+                let bit = match cast {
+                    Cast::Hit(bit) => bit,
+                    Cast::Miss => continue,
+                    Cast::General => match self.first_hit_cell(&vp, d, t_lo) {
+                        Some(g) => set.bit_of_cell(g),
+                        None => continue,
+                    },
+                };
+                let i = set.index_of_bit(bit) as usize;
                 bits[i >> 6] |= 1u64 << (i & 63);
             }
+        }
+    }
+
+    /// The first pass of [`InverseCaster::observe_into`]: marks each voxel's pixel in `mask`
+    /// and lowers `cell_min` (per [`CELL`]×[`CELL`]-pixel cell) over each voxel's conservative
+    /// footprint to the distance below which its box cannot be entered; returns that distance's
+    /// minimum over the voxels whose footprint is unbounded (boxes reaching the camera plane),
+    /// which bounds every cell.
+    #[inline(never)]
+    fn project_voxels(&self, camera: &Camera, cell_min: &mut [f64], mask: &mut [u64]) -> f64 {
+        const B: i32 = BLOCK as i32;
+        let set = self.set;
+        let r = set.resolution();
+        let k = &camera.intrinsics;
+        let (w, h) = (k.width as usize, k.height as usize);
+        let mtw = w.div_ceil(TILE);
+        let (tw, th) = (w.div_ceil(CELL), h.div_ceil(CELL));
+        let mut global_min = f64::INFINITY;
+        let rho = 0.5 * 3f64.sqrt() * r; // circumradius of a voxel box
+        let z_foot = rho * 1.000_001 + 1e-9;
+        let (wf, hf) = (w as f64, h as f64);
+        let (afx, afy) = (k.fx.abs() * (1.0 + 1e-9), k.fy.abs() * (1.0 + 1e-9));
+        let inv_cell = 1.0 / CELL as f64; // exact: CELL is a power of two
+        let (twi, thi) = (tw as i32, th as i32);
+        let mut block_min = vec![f64::INFINITY; tw * th];
+        // Half-widths (pixels) below which a footprint spans less than B − 1 cells.
+        let span = 0.5 * (B - 1) as f64 * CELL as f64 * (1.0 - 1e-9);
+        for key in set.keys() {
+            let pc = camera.to_camera(center_of(*key, r));
+            let z = pc[2];
+            // `pixel_of` inlined: the same `Intrinsics::project` arithmetic, so the same pixel.
+            let (uc, vc) = (k.fx * pc[0] / z + k.cx, k.fy * pc[1] / z + k.cy);
+            if z > 1e-9 && uc >= 0.0 && vc >= 0.0 && uc < wf && vc < hf {
+                // In [0, w) × [0, h): truncation is the floor.
+                let (u, v) = (uc as i64 as usize, vc as i64 as usize);
+                mask[(v / TILE) * mtw + u / TILE] |= 1u64 << ((v % TILE) * TILE + u % TILE);
+            }
+            let dist = (pc[0] * pc[0] + pc[1] * pc[1] + z * z).sqrt();
+            let near = dist - rho;
+            let near = near - 1e-9 * near.abs() - 1e-12;
+            if z <= z_foot || z.is_nan() {
+                if near < global_min {
+                    global_min = near;
+                }
+                continue;
+            }
+            // Every point q of the ball B(pc, ρ) (which holds the box) has
+            // |q_x/q_z − x/z| = |z·δ_x − x·δ_z| / (z·q_z) ≤ ρ·|pc| / (z·(z − ρ)), δ = q − pc
+            // (Cauchy–Schwarz, q_z ≥ z − ρ > 0); same for y. A ray through a pixel centre that
+            // meets the box does so at a point projecting to that centre, so the centre lies
+            // within this half-width (plus one pixel of rounding margin) of the projected voxel
+            // centre.
+            let hr = rho * dist / (z * (z - rho));
+            let (hu, hv) = (afx * hr + 1.0, afy * hr + 1.0);
+            // Cells whose pixel centres u + 0.5 can lie in [uc − hu, uc + hu]: from a0 to a1
+            // (floors) below.
+            let (a0, b0) = ((uc - hu - 0.5) * inv_cell, (vc - hv - 0.5) * inv_cell);
+            if a0 >= 0.0 && b0 >= 0.0 && hu < span && hv < span {
+                // Common case: a0, b0 ≥ 0, so truncation is the floor, and the footprint spans
+                // less than B − 1 cells, so a1 < ⌊a0⌋ + B (same for b): it lies in the B×B
+                // block from (⌊a0⌋, ⌊b0⌋). Blocks reaching past the image are clipped below.
+                let (tu0, tv0) = (a0 as i32, b0 as i32);
+                if tu0 < twi && tv0 < thi {
+                    let m = &mut block_min[tv0 as usize * tw + tu0 as usize];
+                    *m = fmin(*m, near);
+                }
+                continue;
+            }
+            // Truncation instead of floor: it only differs below 0, where the clamp (or an
+            // extra, harmless cell) absorbs it.
+            let tu0 = (((uc - hu - 0.5) * inv_cell) as i32).max(0);
+            let tu1 = (((uc + hu - 0.5) * inv_cell) as i32).min(twi - 1);
+            let tv0 = (((vc - hv - 0.5) * inv_cell) as i32).max(0);
+            let tv1 = (((vc + hv - 0.5) * inv_cell) as i32).min(thi - 1);
+            if tu1 < tu0 || tv1 < tv0 {
+                continue; // the footprint misses the image
+            }
+            if tu1 - tu0 < B && tv1 - tv0 < B {
+                // Within the B×B cells from (tu0, tv0): one update here, spread below.
+                let m = &mut block_min[tv0 as usize * tw + tu0 as usize];
+                *m = fmin(*m, near);
+                continue;
+            }
+            for tv in tv0..=tv1 {
+                for m in &mut cell_min[tv as usize * tw..][tu0 as usize..=tu1 as usize] {
+                    *m = fmin(*m, near);
+                }
+            }
+        }
+        // Spread each B×B block's bound over its cells: cell (i, j) takes the minimum over the
+        // blocks starting at (i − B + 1..=i, j − B + 1..=j).
+        let spread = |src: &[f64], dst: &mut [f64], n: usize, stride: usize, lines: usize, lstride: usize| {
+            for l in 0..lines {
+                let at = |i: usize| l * lstride + i * stride;
+                for i in 0..n {
+                    let mut m = src[at(i)];
+                    for j in 1..BLOCK.min(i + 1) {
+                        m = fmin(m, src[at(i - j)]);
+                    }
+                    dst[at(i)] = m;
+                }
+            }
+        };
+        let mut rows = vec![f64::INFINITY; tw * th];
+        spread(&block_min, &mut rows, tw, 1, th, tw);
+        spread(&rows, &mut block_min, th, tw, tw, 1);
+        for (m, b) in cell_min.iter_mut().zip(&block_min) {
+            *m = fmin(*m, *b);
+        }
+        global_min
+    }
+
+    /// The [`Octant`] of direction-sign pattern `m` (bit a set: the ray moves down axis a).
+    fn octant<'v>(&self, vp: &'v ViewPlanes, m: usize) -> Octant<'v> {
+        let ny = self.dims[1];
+        let rb = self.set.row_words() * 64;
+        let fs = self.strides;
+        let bs = [ny * rb, rb, 1];
+        let neg = |a: usize| m >> a & 1 == 1;
+        let step = |s: [usize; 3], a: usize| if neg(a) { s[a].wrapping_neg() } else { s[a] };
+        let base = |s: [usize; 3]| (0..3).filter(|&a| neg(a)).map(|a| (self.dims[a] - 1) * s[a]).sum();
+        let pl: [&[f64]; 3] =
+            std::array::from_fn(|a| if neg(a) { &vp.mirror[a][..] } else { &vp.planes[a][..] });
+        Octant {
+            pl,
+            box0: std::array::from_fn(|a| pl[a][0]),
+            box1: std::array::from_fn(|a| pl[a][self.dims[a]]),
+            past_range: next_up(self.max_range),
+            fstep: std::array::from_fn(|a| step(fs, a)),
+            fbase: base(fs),
+            bstep: std::array::from_fn(|a| step(bs, a)),
+            bbase: base(bs),
         }
     }
 
@@ -269,6 +451,135 @@ impl<'a> InverseCaster<'a> {
                 bits[i >> 6] |= 1u64 << (i & 63);
             }
         }
+    }
+
+    /// [`InverseCaster::first_hit_cell`] for a ray with no zero direction component in
+    /// octant `o`, in cheaper bookkeeping: the bitmap bit of the hit, a miss, or
+    /// [`Cast::General`] where the walk starts in the camera's cell (the caller falls back).
+    ///
+    /// Exactness (the same cells visited in the same order, so the same answer):
+    /// - An axis the ray moves down (d < 0) is walked in mirrored coordinates — cell
+    ///   h = n − 1 − g, planes `P[j] = −p[n − j]` ([`ViewPlanes`]), s = 1/(−d) — so every axis
+    ///   steps +1. IEEE division and multiplication are symmetric in sign, so s = −(1/d) and
+    ///   each crossing time `P[j]·s` equals the original `p[n − j]·(1/d)` bit for bit: the walk
+    ///   sees the same times and compares them in the same tie order.
+    /// - The start state "after every crossing at t ≤ t_in" is the state after every crossing
+    ///   at t < next_up(t_in); [`start_cell`] finds the same unique cell as [`cell_at`].
+    /// - Instead of testing `t > max_range` and leaving the grid separately, a step stops when
+    ///   its crossing time reaches `min(t_out, next_up(max_range))`, t_out the exit time of
+    ///   the grid box. Before t_out no crossing leaves the grid (crossing times are monotone in
+    ///   the plane index), so the walks agree; at the first crossing at t ≥ t_out the exit
+    ///   axis is already in its last layer (its previous plane is crossed strictly earlier),
+    ///   which is the empty margin, so from there the original walk only visits empty cells
+    ///   until it leaves the grid: a miss either way.
+    /// - Leaps are those of `first_hit_cell`, mirrored the same way.
+    #[inline(never)]
+    fn cast(&self, o: &Octant<'_>, d: [f64; 3], t_lo: f64, inv_r: f64) -> Cast {
+        let tmax = self.max_range;
+        let [px, py, pz] = o.pl;
+        let ad = [d[0].abs(), d[1].abs(), d[2].abs()];
+        let [sx, sy, sz] = [1.0 / ad[0], 1.0 / ad[1], 1.0 / ad[2]];
+        let ([bx, by, bz], [ex, ey, ez]) = (o.box0, o.box1);
+        let t_in = fmax(fmax(bx * sx, by * sy), bz * sz);
+        let t_out = fmin(fmin(ex * sx, ey * sy), ez * sz);
+        if t_in >= t_out || t_out <= 0.0 || t_in > tmax || t_lo >= t_out || t_lo > tmax {
+            return Cast::Miss;
+        }
+        if t_in < 0.0 && t_lo <= 0.0 {
+            return Cast::General; // starts in the camera's cell
+        }
+        // Nothing is entered before t_lo: the state after every crossing at t < t_lo; else
+        // the state after every crossing at t ≤ t_in.
+        let t0 = if t_lo > t_in && t_lo > 0.0 { t_lo } else { next_up(t_in) };
+        let (mut hx, mut tx) = start_cell(px, sx, ad[0], inv_r, t0);
+        let (mut hy, mut ty) = start_cell(py, sy, ad[1], inv_r, t0);
+        let (mut hz, mut tz) = start_cell(pz, sz, ad[2], inv_r, t0);
+        let lim = fmin(t_out, o.past_range);
+        let [fx, fy, fz] = o.fstep;
+        let at = |base: usize, st: [usize; 3], h: [usize; 3]| {
+            base.wrapping_add(h[0].wrapping_mul(st[0]))
+                .wrapping_add(h[1].wrapping_mul(st[1]))
+                .wrapping_add(h[2].wrapping_mul(st[2]))
+        };
+        let mut idx = at(o.fbase, o.fstep, [hx, hy, hz]);
+        let field = &self.field[..];
+        loop {
+            let dv = field[idx];
+            if dv == 0 {
+                return Cast::Hit(at(o.bbase, o.bstep, [hx, hy, hz]));
+            }
+            if dv >= LEAP_MIN {
+                let mut h = [hx, hy, hz];
+                let mut tn = [tx, ty, tz];
+                if !self.leap(&o.pl, [sx, sy, sz], ad, inv_r, (dv - 1) as usize, &mut h, &mut tn) {
+                    return Cast::Miss;
+                }
+                [hx, hy, hz] = h;
+                [tx, ty, tz] = tn;
+                idx = at(o.fbase, o.fstep, h);
+            }
+            // One Amanatides–Woo step; ties: z, then y, then x.
+            if tz <= ty && tz <= tx {
+                if tz >= lim {
+                    return Cast::Miss;
+                }
+                hz += 1;
+                tz = pz[hz + 1] * sz;
+                idx = idx.wrapping_add(fz);
+            } else if ty <= tx {
+                if ty >= lim {
+                    return Cast::Miss;
+                }
+                hy += 1;
+                ty = py[hy + 1] * sy;
+                idx = idx.wrapping_add(fy);
+            } else {
+                if tx >= lim {
+                    return Cast::Miss;
+                }
+                hx += 1;
+                tx = px[hx + 1] * sx;
+                idx = idx.wrapping_add(fx);
+            }
+        }
+    }
+
+    /// The leap of [`InverseCaster::first_hit_cell`] in [`InverseCaster::cast`]'s coordinates:
+    /// the cells within Chebyshev radius `rad` of `h` are empty; move to the last cell before
+    /// the ray leaves that cube. `false` when that is beyond the range.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn leap(
+        &self,
+        pl: &[&[f64]; 3],
+        s: [f64; 3],
+        ad: [f64; 3],
+        inv_r: f64,
+        rad: usize,
+        h: &mut [usize; 3],
+        tn: &mut [f64; 3],
+    ) -> bool {
+        let dims = self.dims;
+        let mut te = f64::INFINITY;
+        for a in 0..3 {
+            te = te.min(pl[a][(h[a] + rad + 1).min(dims[a])] * s[a]);
+        }
+        if te > self.max_range {
+            return false;
+        }
+        for a in 0..3 {
+            if rad <= SMALL_LEAP {
+                // Short leap: advance crossing by crossing (cheap, no guess).
+                while tn[a] < te {
+                    h[a] += 1;
+                    tn[a] = pl[a][h[a] + 1] * s[a];
+                }
+            } else {
+                h[a] = up_cell(pl[a], s[a], ad[a], inv_r, te, h[a], (h[a] + rad).min(dims[a] - 1));
+                tn[a] = pl[a][h[a] + 1] * s[a];
+            }
+        }
+        true
     }
 
     /// The grid cell of the first S_gt voxel the ray from the view origin along unit `d`
@@ -432,38 +743,13 @@ pub(crate) fn pixel_of(k: &objview_render::Intrinsics, p: [f64; 3]) -> Option<(u
     }
 }
 
-/// Tile size (pixels) of the per-view depth bound.
+/// Tile size (pixels) of the per-view pixel mask: one `u64` per tile.
 const TILE: usize = 8;
-
-/// Conservative image rectangle `(umin, umax, vmin, vmax)` (continuous pixel coordinates,
-/// one-pixel margin) of the projection of a sphere of radius `rho` centred at camera-frame
-/// `pc`; `None` when the sphere reaches the camera plane or its angular extent leaves the
-/// range where the bound holds (then the caller treats it as covering every pixel).
-///
-/// Per image axis, in the plane of that axis and the optical axis the sphere is a disc at
-/// angle θ (tan θ = x/z) of angular radius α (sin α = ρ/D′, D′ = √(x² + z²)); its projection is
-/// `f·tan` of `[θ − α, θ + α]`, whose larger half-width is `f·(tan(|θ| + α) − tan|θ|)`.
-#[inline]
-fn footprint(k: &objview_render::Intrinsics, pc: [f64; 3], rho: f64) -> Option<(f64, f64, f64, f64)> {
-    let z = pc[2];
-    if z <= rho * 1.000_001 + 1e-9 {
-        return None;
-    }
-    let half = |x: f64, f: f64| -> Option<f64> {
-        let ta = x.abs() / z;
-        let d2 = x * x + z * z - rho * rho;
-        let tb = rho / d2.sqrt();
-        let den = 1.0 - ta * tb;
-        if den <= 1e-3 {
-            return None;
-        }
-        Some(f * ((ta + tb) / den - ta) * (1.0 + 1e-9) + 1.0)
-    };
-    let hu = half(pc[0], k.fx)?;
-    let hv = half(pc[1], k.fy)?;
-    let (uc, vc) = (k.fx * pc[0] / z + k.cx, k.fy * pc[1] / z + k.cy);
-    Some((uc - hu, uc + hu, vc - hv, vc + hv))
-}
+/// Cell size (pixels) of the per-view depth bound.
+const CELL: usize = 4;
+/// Voxels whose footprint spans at most `BLOCK` × `BLOCK` depth cells update one block entry,
+/// spread over the cells afterwards.
+const BLOCK: usize = 4;
 
 /// Time of the next plane crossing out of cell `g` along an axis.
 #[inline]
@@ -509,6 +795,75 @@ fn cell_at<const INCLUSIVE: bool>(
         }
     }
     g
+}
+
+/// [`cell_at`] for an axis walked upwards (`p` increasing, crossing into cell g at `p[g]·s`,
+/// `s` > 0; `ad` = |d|): the cell after every crossing at time < t, searched in `[lo, hi]`.
+/// The crossing times are non-decreasing in g, so "crossed before t" holds for a prefix of
+/// cells and the answer — the last crossed cell, clamped to `[lo, hi]` — is unique, whatever
+/// the guess the fix-up loops start from. `t` and the plane times are never NaN.
+#[inline(always)]
+fn up_cell(p: &[f64], s: f64, ad: f64, inv_r: f64, t: f64, lo: usize, hi: usize) -> usize {
+    let mut g = (((t * ad - p[0]) * inv_r) as i64).clamp(lo as i64, hi as i64) as usize;
+    while g > lo && p[g] * s >= t {
+        g -= 1;
+    }
+    while g < hi && p[g + 1] * s < t {
+        g += 1;
+    }
+    g
+}
+
+/// [`up_cell`] over the whole axis (`p` holds the n + 1 planes of n cells) and the time of the
+/// next crossing out of that cell, `p[g + 1]·s`: the same cell, with the common case — the
+/// guess is right — checked by one pair of comparisons.
+#[inline(always)]
+fn start_cell(p: &[f64], s: f64, ad: f64, inv_r: f64, t: f64) -> (usize, f64) {
+    let hi = p.len() - 2;
+    let g = (((t * ad - p[0]) * inv_r) as i64).clamp(0, hi as i64) as usize;
+    let w = &p[g..g + 2];
+    let next = w[1] * s;
+    if (g == 0 || w[0] * s < t) && (g == hi || next >= t) {
+        return (g, next);
+    }
+    let g = up_cell(p, s, ad, inv_r, t, 0, hi);
+    (g, p[g + 1] * s)
+}
+
+/// The smallest f64 above `x` (`f64::next_up`, newer than the MSRV); NaN and +∞ map to
+/// themselves.
+#[inline]
+fn next_up(x: f64) -> f64 {
+    if x.is_nan() || x == f64::INFINITY {
+        x
+    } else if x == 0.0 {
+        f64::from_bits(1)
+    } else if x > 0.0 {
+        f64::from_bits(x.to_bits() + 1)
+    } else {
+        f64::from_bits(x.to_bits() - 1)
+    }
+}
+
+/// `a.max(b)` for non-NaN operands without the NaN handling (`maxsd` alone). Which zero it
+/// returns for ±0 may differ; callers only compare the result.
+#[inline(always)]
+fn fmax(a: f64, b: f64) -> f64 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// `a.min(b)` for non-NaN operands, as [`fmax`].
+#[inline(always)]
+fn fmin(a: f64, b: f64) -> f64 {
+    if a < b {
+        a
+    } else {
+        b
+    }
 }
 
 /// Chebyshev (L∞) distance transform of the set's occupancy grid, capped: repeated one-cell
@@ -809,6 +1164,55 @@ mod tests {
         assert_eq!(union(&[vec![3, 1], vec![2, 3]]), vec![1, 2, 3]);
         let cov = coverage_counts(&[to_bitset(&[0, 2], 4), to_bitset(&[2, 3], 4), to_bitset(&[2], 4)], 4);
         assert_eq!(cov, vec![1, 0, 3, 1]);
+    }
+
+    #[test]
+    fn next_up_is_the_next_float() {
+        assert_eq!(next_up(1.0), 1.0 + f64::EPSILON);
+        assert_eq!(next_up(0.0), f64::from_bits(1));
+        assert_eq!(next_up(-0.0), f64::from_bits(1));
+        assert_eq!(next_up(-1.0), -1.0 + f64::EPSILON / 2.0);
+        assert_eq!(next_up(f64::MAX), f64::INFINITY);
+        assert_eq!(next_up(f64::INFINITY), f64::INFINITY);
+        assert_eq!(next_up(f64::NEG_INFINITY), -f64::MAX);
+        assert!(next_up(f64::NAN).is_nan());
+        for x in [2.5f64, -3.75, 1e-300, -1e-300, 6.0] {
+            let y = next_up(x);
+            assert!(y > x && (x + y) / 2.0 == x || (x + y) / 2.0 == y, "{x}");
+        }
+    }
+
+    /// `up_cell` on mirrored planes finds the same cell as `cell_at` walking down, and on the
+    /// planes themselves the same as `cell_at` walking up, for times on and around crossings.
+    #[test]
+    fn up_cell_matches_cell_at_both_ways() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let r = 0.02;
+        for _ in 0..2000 {
+            let n = rng.gen_range(3..40usize);
+            let o: f64 = rng.gen_range(-1.0..1.0);
+            let g0 = rng.gen_range(-30..10) as f64;
+            let p: Vec<f64> = (0..=n).map(|g| (g0 + g as f64) * r - o).collect();
+            let m: Vec<f64> = p.iter().rev().map(|&x| -x).collect();
+            let d: f64 = rng.gen_range(0.01..1.0);
+            let s = 1.0 / d;
+            let mut times: Vec<f64> = p.iter().map(|&x| x * s).collect();
+            times.extend((0..10).map(|_| rng.gen_range(-3.0..3.0)));
+            for t in times.clone() {
+                times.push(next_up(t));
+            }
+            for &t in &times {
+                let (lo, hi) = (0, n - 1);
+                let up = cell_at::<false>(&p, s, 1, d, r, t, lo, hi);
+                assert_eq!(up_cell(&p, s, d, 1.0 / r, t, lo, hi), up, "up t {t}");
+                let down = cell_at::<false>(&p, -s, -1, -d, r, t, lo, hi);
+                assert_eq!(n - 1 - up_cell(&m, s, d, 1.0 / r, t, lo, hi), down, "down t {t}");
+                let incl = cell_at::<true>(&p, s, 1, d, r, t, lo, hi);
+                assert_eq!(up_cell(&p, s, d, 1.0 / r, next_up(t), lo, hi), incl, "inclusive t {t}");
+                assert_eq!(start_cell(&p, s, d, 1.0 / r, t), (up, p[up + 1] * s), "start t {t}");
+            }
+        }
     }
 
     /// Brute-force Chebyshev distances on a small grid.

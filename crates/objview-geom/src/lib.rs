@@ -21,4 +21,5 @@ pub mod io;
 pub mod normalize;
 pub mod npy;
 pub mod synth;
+pub mod vec3;
 pub mod write;

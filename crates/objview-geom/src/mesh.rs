@@ -2,7 +2,7 @@
 //! frame, u32 triangle indices, and an optional appearance used only for RGB rendering.
 //! Geometry is never re-oriented (SPEC §1): the file frame is the object's pose on the table.
 
-use crate::GeomError;
+use crate::{vec3, GeomError};
 use std::path::Path;
 
 /// A texture image, row-major RGB, row 0 at the top (v = 1 in glTF/OBJ conventions is handled
@@ -105,10 +105,7 @@ impl Mesh {
     /// Area of triangle `t`.
     pub fn triangle_area(&self, t: usize) -> f64 {
         let [a, b, c] = self.triangle(t);
-        let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-        let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-        let n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
-        0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+        0.5 * vec3::norm(vec3::cross(vec3::sub(b, a), vec3::sub(c, a)))
     }
 
     /// Total surface area.

@@ -9,6 +9,7 @@
 //! y = f × x; roll rotates (x, y) about f by the right-hand rule:
 //! x' = cos r·x + sin r·y, y' = −sin r·x + cos r·y.
 
+use objview_geom::vec3::{cross, dot, normalize, sub};
 use objview_geom::Pose;
 
 /// Pinhole intrinsics in pixels, with near/far clipping distances along the camera z axis.
@@ -98,24 +99,6 @@ pub struct Camera {
     pub down: [f64; 3],
     /// Camera z axis (viewing direction), object frame.
     pub forward: [f64; 3],
-}
-
-#[inline]
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-#[inline]
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-#[inline]
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-#[inline]
-fn normalize(a: [f64; 3]) -> [f64; 3] {
-    let n = dot(a, a).sqrt();
-    [a[0] / n, a[1] / n, a[2] / n]
 }
 
 impl Camera {

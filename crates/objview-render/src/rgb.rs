@@ -5,24 +5,12 @@
 //! Lambertian shading with the light at the camera.
 
 use crate::{Frame, NO_HIT};
+use objview_geom::vec3::{cross, dot, sub};
 use objview_geom::{Appearance, Mesh};
 
 /// Grey level of a surface seen exactly edge-on, so that grazing hits stay distinguishable
 /// from the black background; a surface facing the camera is white.
 pub const AMBIENT: f64 = 0.1;
-
-#[inline]
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-#[inline]
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-#[inline]
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
 
 /// Barycentric weights (for corners 0, 1, 2) of the point where the line `o + t·d` meets the
 /// plane of `tri`, clamped to the triangle (a pixel attributed to a triangle by the

@@ -252,27 +252,42 @@ impl<'a> InverseCaster<'a> {
         let qv: Vec<f64> = (0..k.height).map(|v| k.pixel_ray(0, v)[1]).collect();
         let (cr, cd, cf) = (camera.right, camera.down, camera.forward);
         let octants: [Octant<'_>; 8] = std::array::from_fn(|m| self.octant(&vp, m));
+        // Per tile, the rays' set-up arithmetic (direction, reciprocals) runs first for all
+        // its marked pixels, in a loop without data-dependent branches, so that the long
+        // sqrt/division latency chains of different rays overlap; the walks follow. Same
+        // operations on the same values, so the same bits.
+        let mut dirs = [[0.0f64; 3]; TILE * TILE];
+        let mut recs = [[0.0f64; 3]; TILE * TILE];
+        let mut t_los = [0.0f64; TILE * TILE];
         for (t, &m) in mask.iter().enumerate() {
             if m == 0 {
                 continue;
             }
             let (u0, v0) = ((t % tw) * TILE, (t / tw) * TILE);
             let mut m = m;
+            let mut n_rays = 0;
             while m != 0 {
                 let b = m.trailing_zeros() as usize;
                 m &= m - 1;
                 let (u, v) = (u0 + b % TILE, v0 + b / TILE);
-                let t_lo = fmin(cell_min[(v / CELL) * cw + u / CELL], global_min);
+                t_los[n_rays] = fmin(cell_min[(v / CELL) * cw + u / CELL], global_min);
                 // `pixel_ray_direction` with the per-pixel divisions tabulated (same values).
                 let (a, c) = (qu[u], qv[v]);
                 let q: [f64; 3] = std::array::from_fn(|i| a * cr[i] + c * cd[i] + cf[i]);
                 let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt();
-                let d = [q[0] / n, q[1] / n, q[2] / n];
+                dirs[n_rays] = [q[0] / n, q[1] / n, q[2] / n];
+                n_rays += 1;
+            }
+            for (s, d) in recs[..n_rays].iter_mut().zip(&dirs[..n_rays]) {
+                *s = [1.0 / d[0].abs(), 1.0 / d[1].abs(), 1.0 / d[2].abs()];
+            }
+            for j in 0..n_rays {
+                let (d, t_lo) = (dirs[j], t_los[j]);
                 let moving = |x: f64| x != 0.0 && !x.is_nan();
                 let cast = if moving(d[0]) && moving(d[1]) && moving(d[2]) {
                     let o =
                         (d[0] < 0.0) as usize | ((d[1] < 0.0) as usize) << 1 | ((d[2] < 0.0) as usize) << 2;
-                    self.cast(&octants[o], d, t_lo, vp.inv_r)
+                    self.cast(&octants[o], d, recs[j], t_lo, vp.inv_r)
                 } else {
                     Cast::General
                 };
@@ -474,11 +489,11 @@ impl<'a> InverseCaster<'a> {
     ///   until it leaves the grid: a miss either way.
     /// - Leaps are those of `first_hit_cell`, mirrored the same way.
     #[inline(never)]
-    fn cast(&self, o: &Octant<'_>, d: [f64; 3], t_lo: f64, inv_r: f64) -> Cast {
+    fn cast(&self, o: &Octant<'_>, d: [f64; 3], s: [f64; 3], t_lo: f64, inv_r: f64) -> Cast {
         let tmax = self.max_range;
         let [px, py, pz] = o.pl;
         let ad = [d[0].abs(), d[1].abs(), d[2].abs()];
-        let [sx, sy, sz] = [1.0 / ad[0], 1.0 / ad[1], 1.0 / ad[2]];
+        let [sx, sy, sz] = s; // 1/|d| per axis
         let ([bx, by, bz], [ex, ey, ez]) = (o.box0, o.box1);
         let t_in = fmax(fmax(bx * sx, by * sy), bz * sz);
         let t_out = fmin(fmin(ex * sx, ey * sy), ez * sz);

@@ -5,6 +5,7 @@
 mod bench;
 mod common;
 mod demo;
+mod feasibility;
 mod objects;
 mod provenance;
 mod render;
@@ -29,6 +30,8 @@ enum Command {
     Viewset(viewset::Command),
     /// Per-view observed surface voxels O(v) of a mesh for a view set (SPEC §4).
     Visibility(visibility::Args),
+    /// Evaluate a view space's feasibility rules on poses or a view set.
+    Feasibility(feasibility::Args),
     /// Built-in procedural objects.
     #[command(subcommand)]
     Objects(objects::Command),
@@ -59,6 +62,7 @@ fn main() {
         Command::Render(a) => render::run(a),
         Command::Viewset(c) => viewset::run(c),
         Command::Visibility(a) => visibility::run(a),
+        Command::Feasibility(a) => feasibility::run(a),
         Command::Objects(c) => objects::run(c),
         Command::Bench(c) => bench::run(c),
         Command::Demo(a) => demo::run(a),

@@ -731,3 +731,50 @@ fn objects_synth_is_deterministic_and_renderable() {
         assert!(hits.iter().all(|&z| (2.0 - 1e-4..=4.0 + 1e-4).contains(&z)), "{f}: depth outside [2, 4]");
     }
 }
+
+/// `feasibility`: a custom rule file (OR of two half-spaces) on hand-picked poses, and the
+/// built-in `hemi` on the 6 axis directions (exactly those with z ≥ 0: +x, −x, +y, −y, +z).
+#[test]
+fn feasibility_custom_rules_and_builtin_space() {
+    let dir = tempdir();
+    let rules = dir.path().join("front_or_top.json");
+    std::fs::write(
+        &rules,
+        r#"{"name": "front_or_top", "atol": 0.0001, "structured_rule": {"logic": "and", "rules": [
+            {"field": "camera_radius", "op": ">=", "value": 1.0},
+            {"logic": "or", "rules": [
+                {"field": "camera_x", "op": ">", "value": 0.5},
+                {"field": "camera_z", "op": ">", "value": 0.5}]}]}}"#,
+    )
+    .unwrap();
+    let out = objview_ok(&[
+        "feasibility",
+        s(&rules),
+        "--pose",
+        "3,0,0,0,0,0,0",
+        "--pose",
+        "-3,0,0,0,0,0,0",
+        "--pose",
+        "0,0,3,0,0,0,1.0",
+        "--pose",
+        "0.6,0,0.6,0,0,0,0",
+    ]);
+    let verdicts: Vec<&str> = out
+        .lines()
+        .filter(|l| !l.starts_with("space="))
+        .map(|l| l.split_whitespace().nth(2).unwrap())
+        .collect();
+    assert_eq!(verdicts, ["feasible", "infeasible:", "feasible", "infeasible:"], "{out}");
+    assert!(out.contains("camera_radius"), "the radius rule is named for the inner pose: {out}");
+    assert!(out.ends_with("space=front_or_top feasible=2 of 4\n"), "{out}");
+
+    let views = dir.path().join("axes.txt");
+    std::fs::write(&views, "1 0 0\n-1 0 0\n0 1 0\n0 -1 0\n0 0 1\n0 0 -1\n").unwrap();
+    let out = objview_ok(&["feasibility", "hemi", "--views", s(&views), "--quiet"]);
+    assert_eq!(out, "space=hemi feasible=5 of 6\n");
+
+    let bad = dir.path().join("bad.json");
+    std::fs::write(&bad, r#"{"name": "x", "structured_rule": {"logic": "xor", "rules": []}}"#).unwrap();
+    let err = objview_err(&["feasibility", s(&bad), "--views", s(&views)]);
+    assert!(err.contains("bad.json"), "{err}");
+}

@@ -259,6 +259,8 @@ impl<'a> InverseCaster<'a> {
         let mut dirs = [[0.0f64; 3]; TILE * TILE];
         let mut recs = [[0.0f64; 3]; TILE * TILE];
         let mut t_los = [0.0f64; TILE * TILE];
+        let (mut t_ins, mut t_outs) = ([0.0f64; TILE * TILE], [0.0f64; TILE * TILE]);
+        let mut octs = [0u8; TILE * TILE];
         for (t, &m) in mask.iter().enumerate() {
             if m == 0 {
                 continue;
@@ -278,16 +280,23 @@ impl<'a> InverseCaster<'a> {
                 dirs[n_rays] = [q[0] / n, q[1] / n, q[2] / n];
                 n_rays += 1;
             }
-            for (s, d) in recs[..n_rays].iter_mut().zip(&dirs[..n_rays]) {
-                *s = [1.0 / d[0].abs(), 1.0 / d[1].abs(), 1.0 / d[2].abs()];
+            for j in 0..n_rays {
+                let d = dirs[j];
+                let s = [1.0 / d[0].abs(), 1.0 / d[1].abs(), 1.0 / d[2].abs()];
+                recs[j] = s;
+                let o = (d[0] < 0.0) as usize | ((d[1] < 0.0) as usize) << 1 | ((d[2] < 0.0) as usize) << 2;
+                octs[j] = o as u8;
+                // `cast`'s grid-box entry and exit times (meaningful only where it is called).
+                let (b0, b1) = (octants[o].box0, octants[o].box1);
+                t_ins[j] = fmax(fmax(b0[0] * s[0], b0[1] * s[1]), b0[2] * s[2]);
+                t_outs[j] = fmin(fmin(b1[0] * s[0], b1[1] * s[1]), b1[2] * s[2]);
             }
             for j in 0..n_rays {
                 let (d, t_lo) = (dirs[j], t_los[j]);
                 let moving = |x: f64| x != 0.0 && !x.is_nan();
                 let cast = if moving(d[0]) && moving(d[1]) && moving(d[2]) {
-                    let o =
-                        (d[0] < 0.0) as usize | ((d[1] < 0.0) as usize) << 1 | ((d[2] < 0.0) as usize) << 2;
-                    self.cast(&octants[o], d, recs[j], t_lo, vp.inv_r)
+                    let o = &octants[octs[j] as usize];
+                    self.cast(o, d, recs[j], [t_ins[j], t_outs[j]], t_lo, vp.inv_r)
                 } else {
                     Cast::General
                 };
@@ -489,14 +498,14 @@ impl<'a> InverseCaster<'a> {
     ///   until it leaves the grid: a miss either way.
     /// - Leaps are those of `first_hit_cell`, mirrored the same way.
     #[inline(never)]
-    fn cast(&self, o: &Octant<'_>, d: [f64; 3], s: [f64; 3], t_lo: f64, inv_r: f64) -> Cast {
+    #[allow(clippy::too_many_arguments)]
+    fn cast(&self, o: &Octant<'_>, d: [f64; 3], s: [f64; 3], t_box: [f64; 2], t_lo: f64, inv_r: f64) -> Cast {
         let tmax = self.max_range;
         let [px, py, pz] = o.pl;
         let ad = [d[0].abs(), d[1].abs(), d[2].abs()];
         let [sx, sy, sz] = s; // 1/|d| per axis
-        let ([bx, by, bz], [ex, ey, ez]) = (o.box0, o.box1);
-        let t_in = fmax(fmax(bx * sx, by * sy), bz * sz);
-        let t_out = fmin(fmin(ex * sx, ey * sy), ez * sz);
+                              // The grid-box entry and exit times `max_a box0[a]·s[a]`, `min_a box1[a]·s[a]`.
+        let [t_in, t_out] = t_box;
         if t_in >= t_out || t_out <= 0.0 || t_in > tmax || t_lo >= t_out || t_lo > tmax {
             return Cast::Miss;
         }

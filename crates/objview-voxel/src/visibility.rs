@@ -41,11 +41,22 @@
 //! - the walk of a ray with no zero direction component runs in mirrored coordinates in which
 //!   every axis steps up (bit-identical crossing times; see `InverseCaster::cast`), with one
 //!   range test per step;
-//! - `f64::floor` is avoided in hot paths (it is a libm call on baseline x86-64).
+//! - `f64::floor` is avoided in hot paths (it is a libm call on baseline x86-64);
+//! - latency hiding: the first pass computes each chunk of 64 voxels' projections in a
+//!   branch-free loop before the data-dependent updates, and the second pass computes each
+//!   tile's ray set-ups (direction, reciprocals, grid-box entry/exit, start cell) before its
+//!   walks, so that the sqrt/division chains of different voxels and rays overlap (and the
+//!   first loop vectorizes); same operations on the same values;
+//! - on x86-64 CPUs with AVX2 and POPCNT (detected at run time) the same code is compiled for
+//!   them (wider vectors, hardware popcount in the rank lookups); FMA is not enabled, so every
+//!   IEEE operation and rounding is the same.
 //!
 //! On the `objview bench render` object (built-in `mug`, 98 128 triangles, |S_gt| = 32 043, 16
-//! views of tammes-128) `inverse` costs ≈18 M instructions per view on one core
-//! (`examples/inverse_views.rs` under callgrind; ≈38 M with one full walk per voxel).
+//! views of tammes-128) `inverse` costs ≈17.8 M instructions per view on one core
+//! (`examples/inverse_views.rs` under callgrind on the AVX2 path; ≈38 M with one full walk per
+//! voxel): ≈5.2 M in the walks after their start (`cast`, `leap`), the rest in the first pass
+//! and the batched ray set-ups; ≈1.5 ms per view on an idle Sapphire Rapids core (was ≈2.05 ms
+//! at ≈18.0 M instructions before the batching, which trades a few instructions for overlap).
 
 use crate::key::{center_of, key_of};
 use crate::set::VoxelSet;
@@ -132,6 +143,27 @@ enum Cast {
     Miss,
     /// Not handled by the fast walk: use [`InverseCaster::first_hit_cell`].
     General,
+}
+
+/// One ray of [`InverseCaster::observe_into`] and its start state for [`InverseCaster::cast`]
+/// (see [`InverseCaster::ray_start`]).
+#[derive(Clone, Copy, Default)]
+struct Ray {
+    /// Unit direction.
+    d: [f64; 3],
+    /// Lower bound of the entry time of any S_gt box (the depth bound).
+    t_lo: f64,
+    /// `|d|` and `1/|d|` per axis.
+    ad: [f64; 3],
+    s: [f64; 3],
+    /// Grid-box entry and exit times in the octant's walk coordinates.
+    t_in: f64,
+    t_out: f64,
+    /// Start cell (walk coordinates) and its next crossing time per axis.
+    h: [usize; 3],
+    tn: [f64; 3],
+    /// Octant index (bit a set: the ray moves down axis a).
+    oct: u8,
 }
 
 /// Per-view constants of [`InverseCaster::cast`] for one octant of ray directions (which axes
@@ -235,6 +267,27 @@ impl<'a> InverseCaster<'a> {
     /// answers them all; every walk starts at its cell's bound instead of at the grid box,
     /// which skips the empty space in front of the object in O(1).
     pub fn observe_into(&self, camera: &Camera, bits: &mut [u64]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("popcnt") {
+            // SAFETY: the CPU has the features `observe_avx2` is compiled for.
+            return unsafe { self.observe_avx2(camera, bits) };
+        }
+        self.observe_body(camera, bits)
+    }
+
+    /// [`InverseCaster::observe_into`] compiled for AVX2 and POPCNT (selected at run time):
+    /// wider vectors in the first pass and a hardware popcount in the rank lookups. The same
+    /// source, so the same IEEE operations per value (FMA, which would change roundings, is
+    /// not enabled, and the compiler never contracts without it), hence the same bits.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,popcnt")]
+    fn observe_avx2(&self, camera: &Camera, bits: &mut [u64]) {
+        self.observe_body(camera, bits)
+    }
+
+    /// The body of [`InverseCaster::observe_into`].
+    #[inline(always)]
+    fn observe_body(&self, camera: &Camera, bits: &mut [u64]) {
         let set = self.set;
         if set.is_empty() {
             return;
@@ -252,15 +305,12 @@ impl<'a> InverseCaster<'a> {
         let qv: Vec<f64> = (0..k.height).map(|v| k.pixel_ray(0, v)[1]).collect();
         let (cr, cd, cf) = (camera.right, camera.down, camera.forward);
         let octants: [Octant<'_>; 8] = std::array::from_fn(|m| self.octant(&vp, m));
-        // Per tile, the rays' set-up arithmetic (direction, reciprocals) runs first for all
-        // its marked pixels, in a loop without data-dependent branches, so that the long
-        // sqrt/division latency chains of different rays overlap; the walks follow. Same
-        // operations on the same values, so the same bits.
-        let mut dirs = [[0.0f64; 3]; TILE * TILE];
-        let mut recs = [[0.0f64; 3]; TILE * TILE];
-        let mut t_los = [0.0f64; TILE * TILE];
-        let (mut t_ins, mut t_outs) = ([0.0f64; TILE * TILE], [0.0f64; TILE * TILE]);
-        let mut octs = [0u8; TILE * TILE];
+        // Per tile, the rays' set-up arithmetic (direction, reciprocals, grid-box entry and
+        // exit, start cell) runs first for all its marked pixels, in loops without
+        // data-dependent branches, so that the long sqrt/division latency chains of
+        // different rays overlap; the walks follow. Same operations on the same values, so
+        // the same bits; a ray that `cast` rejects before its walk just wastes its start.
+        let mut rays = [Ray::default(); TILE * TILE];
         for (t, &m) in mask.iter().enumerate() {
             if m == 0 {
                 continue;
@@ -272,31 +322,23 @@ impl<'a> InverseCaster<'a> {
                 let b = m.trailing_zeros() as usize;
                 m &= m - 1;
                 let (u, v) = (u0 + b % TILE, v0 + b / TILE);
-                t_los[n_rays] = fmin(cell_min[(v / CELL) * cw + u / CELL], global_min);
+                let ray = &mut rays[n_rays];
+                ray.t_lo = fmin(cell_min[(v / CELL) * cw + u / CELL], global_min);
                 // `pixel_ray_direction` with the per-pixel divisions tabulated (same values).
                 let (a, c) = (qu[u], qv[v]);
                 let q: [f64; 3] = std::array::from_fn(|i| a * cr[i] + c * cd[i] + cf[i]);
                 let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt();
-                dirs[n_rays] = [q[0] / n, q[1] / n, q[2] / n];
+                ray.d = [q[0] / n, q[1] / n, q[2] / n];
                 n_rays += 1;
             }
-            for j in 0..n_rays {
-                let d = dirs[j];
-                let s = [1.0 / d[0].abs(), 1.0 / d[1].abs(), 1.0 / d[2].abs()];
-                recs[j] = s;
-                let o = (d[0] < 0.0) as usize | ((d[1] < 0.0) as usize) << 1 | ((d[2] < 0.0) as usize) << 2;
-                octs[j] = o as u8;
-                // `cast`'s grid-box entry and exit times (meaningful only where it is called).
-                let (b0, b1) = (octants[o].box0, octants[o].box1);
-                t_ins[j] = fmax(fmax(b0[0] * s[0], b0[1] * s[1]), b0[2] * s[2]);
-                t_outs[j] = fmin(fmin(b1[0] * s[0], b1[1] * s[1]), b1[2] * s[2]);
+            for ray in &mut rays[..n_rays] {
+                self.ray_start(&octants, ray, vp.inv_r);
             }
-            for j in 0..n_rays {
-                let (d, t_lo) = (dirs[j], t_los[j]);
+            for ray in &rays[..n_rays] {
+                let (d, t_lo) = (ray.d, ray.t_lo);
                 let moving = |x: f64| x != 0.0 && !x.is_nan();
                 let cast = if moving(d[0]) && moving(d[1]) && moving(d[2]) {
-                    let o = &octants[octs[j] as usize];
-                    self.cast(o, d, recs[j], [t_ins[j], t_outs[j]], t_lo, vp.inv_r)
+                    self.cast(&octants[ray.oct as usize], ray, vp.inv_r)
                 } else {
                     Cast::General
                 };
@@ -314,12 +356,41 @@ impl<'a> InverseCaster<'a> {
         }
     }
 
+    /// The set-up of [`InverseCaster::cast`] for `ray` (whose `d` and `t_lo` are set): its
+    /// octant, reciprocals, grid-box entry and exit times, start time and start cell. The
+    /// start is meaningful only for a ray that `cast` walks (no zero or NaN direction
+    /// component, not rejected by the entry/exit tests); for any other it is some in-range
+    /// cell, unused.
+    #[inline(always)]
+    fn ray_start(&self, octants: &[Octant<'_>; 8], ray: &mut Ray, inv_r: f64) {
+        let d = ray.d;
+        let ad = [d[0].abs(), d[1].abs(), d[2].abs()];
+        let s = [1.0 / ad[0], 1.0 / ad[1], 1.0 / ad[2]];
+        let oct = (d[0] < 0.0) as usize | ((d[1] < 0.0) as usize) << 1 | ((d[2] < 0.0) as usize) << 2;
+        let o = &octants[oct];
+        let (b0, b1) = (o.box0, o.box1);
+        let t_in = fmax(fmax(b0[0] * s[0], b0[1] * s[1]), b0[2] * s[2]);
+        let t_out = fmin(fmin(b1[0] * s[0], b1[1] * s[1]), b1[2] * s[2]);
+        // Nothing is entered before t_lo: the state after every crossing at t < t_lo; else
+        // the state after every crossing at t ≤ t_in.
+        let t_lo = ray.t_lo;
+        let t0 = if t_lo > t_in && t_lo > 0.0 { t_lo } else { next_up(t_in) };
+        for a in 0..3 {
+            (ray.h[a], ray.tn[a]) = start_cell(o.pl[a], s[a], ad[a], inv_r, t0);
+        }
+        ray.ad = ad;
+        ray.s = s;
+        ray.t_in = t_in;
+        ray.t_out = t_out;
+        ray.oct = oct as u8;
+    }
+
     /// The first pass of [`InverseCaster::observe_into`]: marks each voxel's pixel in `mask`
     /// and lowers `cell_min` (per [`CELL`]×[`CELL`]-pixel cell) over each voxel's conservative
     /// footprint to the distance below which its box cannot be entered; returns that distance's
     /// minimum over the voxels whose footprint is unbounded (boxes reaching the camera plane),
     /// which bounds every cell.
-    #[inline(never)]
+    #[inline(always)]
     fn project_voxels(&self, camera: &Camera, cell_min: &mut [f64], mask: &mut [u64]) -> f64 {
         const B: i32 = BLOCK as i32;
         let set = self.set;
@@ -338,65 +409,77 @@ impl<'a> InverseCaster<'a> {
         let mut block_min = vec![f64::INFINITY; tw * th];
         // Half-widths (pixels) below which a footprint spans less than B − 1 cells.
         let span = 0.5 * (B - 1) as f64 * CELL as f64 * (1.0 - 1e-9);
-        for key in set.keys() {
-            let pc = camera.to_camera(center_of(*key, r));
-            let z = pc[2];
-            // `pixel_of` inlined: the same `Intrinsics::project` arithmetic, so the same pixel.
-            let (uc, vc) = (k.fx * pc[0] / z + k.cx, k.fy * pc[1] / z + k.cy);
-            if z > 1e-9 && uc >= 0.0 && vc >= 0.0 && uc < wf && vc < hf {
-                // In [0, w) × [0, h): truncation is the floor.
-                let (u, v) = (uc as i64 as usize, vc as i64 as usize);
-                mask[(v / TILE) * mtw + u / TILE] |= 1u64 << ((v % TILE) * TILE + u % TILE);
+        // Per chunk of voxels, the arithmetic runs first in a branch-free loop (which the
+        // compiler vectorizes; the same IEEE operations per voxel, so the same values), then
+        // the data-dependent updates.
+        const CHUNK: usize = 64;
+        let mut vals = [[0.0f64; 5]; CHUNK];
+        for keys in set.keys().chunks(CHUNK) {
+            for (val, key) in vals.iter_mut().zip(keys) {
+                let pc = camera.to_camera(center_of(*key, r));
+                let z = pc[2];
+                // `pixel_of` inlined: the same `Intrinsics::project` arithmetic, so the same
+                // pixel.
+                let (uc, vc) = (k.fx * pc[0] / z + k.cx, k.fy * pc[1] / z + k.cy);
+                let dist = (pc[0] * pc[0] + pc[1] * pc[1] + z * z).sqrt();
+                // Used only where z > z_foot (see below).
+                let hr = rho * dist / (z * (z - rho));
+                *val = [z, uc, vc, dist, hr];
             }
-            let dist = (pc[0] * pc[0] + pc[1] * pc[1] + z * z).sqrt();
-            let near = dist - rho;
-            let near = near - 1e-9 * near.abs() - 1e-12;
-            if z <= z_foot || z.is_nan() {
-                if near < global_min {
-                    global_min = near;
+            for &[z, uc, vc, dist, hr] in &vals[..keys.len()] {
+                if z > 1e-9 && uc >= 0.0 && vc >= 0.0 && uc < wf && vc < hf {
+                    // In [0, w) × [0, h): truncation is the floor.
+                    let (u, v) = (uc as i64 as usize, vc as i64 as usize);
+                    mask[(v / TILE) * mtw + u / TILE] |= 1u64 << ((v % TILE) * TILE + u % TILE);
                 }
-                continue;
-            }
-            // Every point q of the ball B(pc, ρ) (which holds the box) has
-            // |q_x/q_z − x/z| = |z·δ_x − x·δ_z| / (z·q_z) ≤ ρ·|pc| / (z·(z − ρ)), δ = q − pc
-            // (Cauchy–Schwarz, q_z ≥ z − ρ > 0); same for y. A ray through a pixel centre that
-            // meets the box does so at a point projecting to that centre, so the centre lies
-            // within this half-width (plus one pixel of rounding margin) of the projected voxel
-            // centre.
-            let hr = rho * dist / (z * (z - rho));
-            let (hu, hv) = (afx * hr + 1.0, afy * hr + 1.0);
-            // Cells whose pixel centres u + 0.5 can lie in [uc − hu, uc + hu]: from a0 to a1
-            // (floors) below.
-            let (a0, b0) = ((uc - hu - 0.5) * inv_cell, (vc - hv - 0.5) * inv_cell);
-            if a0 >= 0.0 && b0 >= 0.0 && hu < span && hv < span {
-                // Common case: a0, b0 ≥ 0, so truncation is the floor, and the footprint spans
-                // less than B − 1 cells, so a1 < ⌊a0⌋ + B (same for b): it lies in the B×B
-                // block from (⌊a0⌋, ⌊b0⌋). Blocks reaching past the image are clipped below.
-                let (tu0, tv0) = (a0 as i32, b0 as i32);
-                if tu0 < twi && tv0 < thi {
+                let near = dist - rho;
+                let near = near - 1e-9 * near.abs() - 1e-12;
+                if z <= z_foot || z.is_nan() {
+                    if near < global_min {
+                        global_min = near;
+                    }
+                    continue;
+                }
+                // Every point q of the ball B(pc, ρ) (which holds the box) has
+                // |q_x/q_z − x/z| = |z·δ_x − x·δ_z| / (z·q_z) ≤ ρ·|pc| / (z·(z − ρ)), δ = q − pc
+                // (Cauchy–Schwarz, q_z ≥ z − ρ > 0); same for y. A ray through a pixel centre that
+                // meets the box does so at a point projecting to that centre, so the centre lies
+                // within this half-width (plus one pixel of rounding margin) of the projected voxel
+                // centre.
+                let (hu, hv) = (afx * hr + 1.0, afy * hr + 1.0);
+                // Cells whose pixel centres u + 0.5 can lie in [uc − hu, uc + hu]: from a0 to a1
+                // (floors) below.
+                let (a0, b0) = ((uc - hu - 0.5) * inv_cell, (vc - hv - 0.5) * inv_cell);
+                if a0 >= 0.0 && b0 >= 0.0 && hu < span && hv < span {
+                    // Common case: a0, b0 ≥ 0, so truncation is the floor, and the footprint spans
+                    // less than B − 1 cells, so a1 < ⌊a0⌋ + B (same for b): it lies in the B×B
+                    // block from (⌊a0⌋, ⌊b0⌋). Blocks reaching past the image are clipped below.
+                    let (tu0, tv0) = (a0 as i32, b0 as i32);
+                    if tu0 < twi && tv0 < thi {
+                        let m = &mut block_min[tv0 as usize * tw + tu0 as usize];
+                        *m = fmin(*m, near);
+                    }
+                    continue;
+                }
+                // Truncation instead of floor: it only differs below 0, where the clamp (or an
+                // extra, harmless cell) absorbs it.
+                let tu0 = (((uc - hu - 0.5) * inv_cell) as i32).max(0);
+                let tu1 = (((uc + hu - 0.5) * inv_cell) as i32).min(twi - 1);
+                let tv0 = (((vc - hv - 0.5) * inv_cell) as i32).max(0);
+                let tv1 = (((vc + hv - 0.5) * inv_cell) as i32).min(thi - 1);
+                if tu1 < tu0 || tv1 < tv0 {
+                    continue; // the footprint misses the image
+                }
+                if tu1 - tu0 < B && tv1 - tv0 < B {
+                    // Within the B×B cells from (tu0, tv0): one update here, spread below.
                     let m = &mut block_min[tv0 as usize * tw + tu0 as usize];
                     *m = fmin(*m, near);
+                    continue;
                 }
-                continue;
-            }
-            // Truncation instead of floor: it only differs below 0, where the clamp (or an
-            // extra, harmless cell) absorbs it.
-            let tu0 = (((uc - hu - 0.5) * inv_cell) as i32).max(0);
-            let tu1 = (((uc + hu - 0.5) * inv_cell) as i32).min(twi - 1);
-            let tv0 = (((vc - hv - 0.5) * inv_cell) as i32).max(0);
-            let tv1 = (((vc + hv - 0.5) * inv_cell) as i32).min(thi - 1);
-            if tu1 < tu0 || tv1 < tv0 {
-                continue; // the footprint misses the image
-            }
-            if tu1 - tu0 < B && tv1 - tv0 < B {
-                // Within the B×B cells from (tu0, tv0): one update here, spread below.
-                let m = &mut block_min[tv0 as usize * tw + tu0 as usize];
-                *m = fmin(*m, near);
-                continue;
-            }
-            for tv in tv0..=tv1 {
-                for m in &mut cell_min[tv as usize * tw..][tu0 as usize..=tu1 as usize] {
-                    *m = fmin(*m, near);
+                for tv in tv0..=tv1 {
+                    for m in &mut cell_min[tv as usize * tw..][tu0 as usize..=tu1 as usize] {
+                        *m = fmin(*m, near);
+                    }
                 }
             }
         }
@@ -499,25 +582,18 @@ impl<'a> InverseCaster<'a> {
     /// - Leaps are those of `first_hit_cell`, mirrored the same way.
     #[inline(never)]
     #[allow(clippy::too_many_arguments)]
-    fn cast(&self, o: &Octant<'_>, d: [f64; 3], s: [f64; 3], t_box: [f64; 2], t_lo: f64, inv_r: f64) -> Cast {
+    fn cast(&self, o: &Octant<'_>, ray: &Ray, inv_r: f64) -> Cast {
         let tmax = self.max_range;
         let [px, py, pz] = o.pl;
-        let ad = [d[0].abs(), d[1].abs(), d[2].abs()];
-        let [sx, sy, sz] = s; // 1/|d| per axis
-                              // The grid-box entry and exit times `max_a box0[a]·s[a]`, `min_a box1[a]·s[a]`.
-        let [t_in, t_out] = t_box;
+        let (ad, [sx, sy, sz]) = (ray.ad, ray.s);
+        let (t_in, t_out, t_lo) = (ray.t_in, ray.t_out, ray.t_lo);
         if t_in >= t_out || t_out <= 0.0 || t_in > tmax || t_lo >= t_out || t_lo > tmax {
             return Cast::Miss;
         }
         if t_in < 0.0 && t_lo <= 0.0 {
             return Cast::General; // starts in the camera's cell
         }
-        // Nothing is entered before t_lo: the state after every crossing at t < t_lo; else
-        // the state after every crossing at t ≤ t_in.
-        let t0 = if t_lo > t_in && t_lo > 0.0 { t_lo } else { next_up(t_in) };
-        let (mut hx, mut tx) = start_cell(px, sx, ad[0], inv_r, t0);
-        let (mut hy, mut ty) = start_cell(py, sy, ad[1], inv_r, t0);
-        let (mut hz, mut tz) = start_cell(pz, sz, ad[2], inv_r, t0);
+        let ([mut hx, mut hy, mut hz], [mut tx, mut ty, mut tz]) = (ray.h, ray.tn);
         let lim = fmin(t_out, o.past_range);
         let [fx, fy, fz] = o.fstep;
         let at = |base: usize, st: [usize; 3], h: [usize; 3]| {

@@ -1,5 +1,5 @@
 //! Per-view timing of O(v) in both visibility modes, one thread, for `objview bench render`
-//! and `examples/bench_visibility.rs`. Reports medians (robust to a busy machine).
+//! and `examples/inverse_views.rs`. Reports medians (robust to a busy machine).
 
 use crate::set::VoxelSet;
 use crate::visibility::{indices_of_points, InverseCaster};

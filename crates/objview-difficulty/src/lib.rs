@@ -1,7 +1,7 @@
 //! Pure-math core of the difficulty annotation of SPEC §4 (paper §3).
 //!
-//! This crate holds everything of the difficulty pipeline that does not need geometry or an LP
-//! solver, so that it can be tested exhaustively against independently derived values:
+//! This crate holds everything of the difficulty pipeline that does not need geometry, so that it
+//! can be tested exhaustively against independently derived values:
 //!
 //! - [`grid`]: the saturation grid of view-set sizes N.
 //! - [`normal`]: the standard normal density φ, CDF Φ and inverse Φ⁻¹ to near machine precision.
@@ -9,17 +9,24 @@
 //! - [`setcover`]: the combinatorial part of d_plan: cover instances from per-view bitsets,
 //!   optimum-preserving reductions, the deterministic greedy cover and exact solvers for small
 //!   instances (the test oracle for the ILP).
+//! - [`ilp`]: the exact d_plan — reductions, LP bound and the set-cover ILP solved to proven
+//!   optimality with HiGHS, with an honest time-limit status.
 //!
 //! Every constant is a named default collected in a settings struct that outputs record.
 
 pub mod error;
 pub mod grid;
+pub mod ilp;
 pub mod normal;
 pub mod saturation;
 pub mod setcover;
 
 pub use error::DifficultyError;
 pub use grid::{SATURATION_GRID, SATURATION_N_MAX, SATURATION_N_MIN};
+pub use ilp::{
+    solve_min_cover, CoverResult, CoverSettings, CoverStatus, ReductionStats, DEFAULT_RANDOM_SEED,
+    DEFAULT_TIME_LIMIT_S,
+};
 pub use normal::{norm_cdf, norm_inv_cdf, norm_pdf, norm_sf};
 pub use saturation::{
     curve_on_grid, fit_lognormal, running_max, saturation, saturation_point, CurvePoint, LognormalFit,

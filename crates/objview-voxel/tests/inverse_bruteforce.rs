@@ -4,6 +4,8 @@
 //! distance-field leaps, sphere shells), random cameras at radius 1.5–3 including the poles and
 //! rolls, and random rays from inside the grid.
 
+mod common;
+use common::shell_keys;
 use objview_geom::Pose;
 use objview_render::{Camera, Intrinsics};
 use objview_voxel::{center_of, pixel_ray_direction, InverseCaster, VoxelKey, VoxelSet};
@@ -130,23 +132,6 @@ fn cameras(rng: &mut ChaCha8Rng, n: usize) -> Vec<Camera> {
 
 fn blob_keys(rng: &mut ChaCha8Rng, half: i32, count: usize) -> Vec<VoxelKey> {
     (0..count).map(|_| std::array::from_fn(|_| rng.gen_range(-half..half))).collect()
-}
-
-fn shell_keys(r: f64, radius: f64, thickness: f64) -> Vec<VoxelKey> {
-    let n = (radius / r).ceil() as i32 + 1;
-    let mut out = Vec::new();
-    for x in -n..n {
-        for y in -n..n {
-            for z in -n..n {
-                let c = center_of([x, y, z], r);
-                let d = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
-                if (d - radius).abs() <= thickness / 2.0 {
-                    out.push([x, y, z]);
-                }
-            }
-        }
-    }
-    out
 }
 
 fn check_views(keys: &[VoxelKey], r: f64, cams: &[Camera]) -> (usize, usize) {

@@ -4,30 +4,15 @@
 //! over many views — the tammes-128 directions at radius 3 and random closer cameras with
 //! offset look-at points and rolls. The sets must be bit-identical.
 
+mod common;
+use common::shell_keys;
 use objview_geom::cloud::{cloud_count, sample_surface, DEFAULT_CLOUD_SEED};
 use objview_geom::Pose;
 use objview_render::{Camera, Intrinsics};
 use objview_views::ViewSet;
-use objview_voxel::{center_of, InverseCaster, VoxelKey, VoxelSet, DEFAULT_RESOLUTION};
+use objview_voxel::{InverseCaster, VoxelSet, DEFAULT_RESOLUTION};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-
-fn shell_keys(r: f64, radius: f64, thickness: f64) -> Vec<VoxelKey> {
-    let n = (radius / r).ceil() as i32 + 1;
-    let mut out = Vec::new();
-    for x in -n..n {
-        for y in -n..n {
-            for z in -n..n {
-                let c = center_of([x, y, z], r);
-                let d = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
-                if (d - radius).abs() <= thickness / 2.0 {
-                    out.push([x, y, z]);
-                }
-            }
-        }
-    }
-    out
-}
 
 /// The first `n` tammes-128 views at radius 3, then random cameras at radius 1.2–3 with a
 /// random look-at near the origin and a random roll.

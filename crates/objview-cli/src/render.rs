@@ -18,7 +18,8 @@ pub struct Args {
     /// `unit`: centre the AABB and scale the farthest vertex to 1; `none`: already normalized.
     #[arg(long, default_value = "unit")]
     pub normalize: Normalization,
-    /// Output depth: 512×512 float32 NPY, row = image v, camera-frame z, 0 = no hit.
+    /// Output depth: 512×512 float32 NPY, row = image v, camera-frame z, 0 = no hit. The
+    /// settings that produced it are written beside it as `<DEPTH>.json`.
     #[arg(long)]
     pub depth: PathBuf,
     /// Output observed point cloud (object frame), binary PLY.
@@ -37,7 +38,7 @@ pub fn parse_pose(s: &str) -> Result<Pose, String> {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let (mesh, _) = load_normalized(&a.mesh, a.normalize)?;
+    let (mesh, transform) = load_normalized(&a.mesh, a.normalize)?;
     for out in [Some(&a.depth), a.points.as_ref(), a.preview.as_ref(), a.rgb.as_ref()].into_iter().flatten() {
         crate::common::create_parent(out)?;
     }
@@ -57,6 +58,28 @@ pub fn run(a: Args) -> Result<()> {
         objview_render::preview::save_rgb_png(w as u32, h as u32, &rgb, p)
             .with_context(|| format!("writing {}", p.display()))?;
     }
+    // Provenance of every file written above (NPY cannot carry it): `<depth>.json`.
+    let k = cam.intrinsics;
+    let meta = crate::provenance::settings(
+        "render",
+        serde_json::json!({
+            "mesh": a.mesh.display().to_string(),
+            "normalize": a.normalize.to_string(),
+            "normalization": {"center": transform.center, "scale": transform.scale},
+            "pose": a.pose.to_array(),
+            "intrinsics": {"width": k.width, "height": k.height, "fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
+                           "znear": k.znear, "zfar": k.zfar},
+            "depth": {"file": a.depth.display().to_string(), "dtype": "float32", "shape": [h, w],
+                      "value": "camera-frame z of the first hit through each pixel centre; 0 = no hit"},
+            "points": a.points.as_ref().map(|p| p.display().to_string()),
+            "preview": a.preview.as_ref().map(|p| p.display().to_string()),
+            "rgb": a.rgb.as_ref().map(|p| p.display().to_string()),
+            "hits": frame.num_hits(),
+        }),
+    );
+    let mut meta_path = a.depth.clone().into_os_string();
+    meta_path.push(".json");
+    crate::common::write_json(std::path::Path::new(&meta_path), &meta)?;
     println!(
         "{}: {} of {} pixels hit; depth -> {}",
         a.mesh.display(),

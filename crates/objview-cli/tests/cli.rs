@@ -778,3 +778,32 @@ fn feasibility_custom_rules_and_builtin_space() {
     let err = objview_err(&["feasibility", s(&bad), "--views", s(&views)]);
     assert!(err.contains("bad.json"), "{err}");
 }
+
+/// `render` records what produced its outputs in `<DEPTH>.json` (NPY cannot carry it).
+#[test]
+fn render_writes_provenance_beside_the_depth() {
+    let dir = tempdir();
+    let mesh = dir.path().join("tri.obj");
+    write_obj(&mesh, &[[0.0, -0.5, -0.5], [0.0, 0.5, -0.5], [0.0, 0.0, 0.5]], &[[0, 1, 2]]);
+    let depth = dir.path().join("d.npy");
+    objview_ok(&[
+        "render",
+        s(&mesh),
+        "--pose",
+        "-3,0,0,0,0,0,0.25",
+        "--normalize",
+        "none",
+        "--depth",
+        s(&depth),
+    ]);
+    let meta: serde_json::Value =
+        serde_json::from_slice(&read(&dir.path().join("d.npy.json"))).expect("provenance JSON");
+    assert_eq!(meta["tool"], "objview");
+    assert_eq!(meta["command"], "render");
+    assert_eq!(meta["pose"], serde_json::json!([-3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.25]));
+    assert_eq!(meta["normalize"], "none");
+    assert_eq!(meta["depth"]["shape"], serde_json::json!([512, 512]));
+    let hits = read_depth(&depth).data.iter().filter(|&&z| z != 0.0).count();
+    assert!(hits > 0);
+    assert_eq!(meta["hits"], serde_json::json!(hits));
+}

@@ -491,11 +491,7 @@ unsafe fn draw_rows_avx2(
 ) {
     use std::arch::x86_64::*;
     let wu = s.px.len() - LANES;
-    let (a0, a1, a2) = (_mm256_set1_ps(k.a[0]), _mm256_set1_ps(k.a[1]), _mm256_set1_ps(k.a[2]));
-    let (n0, inv_d) = (_mm256_set1_ps(k.n0), _mm256_set1_ps(k.inv_d));
-    let (wmin, wmax) = (_mm256_set1_ps(k.wmin), _mm256_set1_ps(k.wmax));
-    let zero = _mm256_setzero_ps();
-    let ones = _mm256_set1_epi32(-1);
+    let tv = TriVecs::new(k);
     let sign = _mm256_set1_epi32(i32::MIN);
     let iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
     let idv = _mm256_set1_epi32(id as i32);
@@ -526,17 +522,7 @@ unsafe fn draw_rows_avx2(
             let r1 = _mm256_add_ps(_mm256_mul_ps(b1, py), c1);
             let r2 = _mm256_add_ps(_mm256_mul_ps(b2, py), c2);
             let rw = _mm256_add_ps(_mm256_mul_ps(n1v, py), n2v);
-            let m0 = _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_add_ps(_mm256_mul_ps(a0, x), r0), zero);
-            let m1 = _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_add_ps(_mm256_mul_ps(a1, x), r1), zero);
-            let m2 = _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_add_ps(_mm256_mul_ps(a2, x), r2), zero);
-            let w = _mm256_mul_ps(_mm256_add_ps(_mm256_mul_ps(n0, x), rw), inv_d);
-            let m3 = _mm256_cmp_ps::<_CMP_GE_OQ>(w, wmin);
-            let m4 = _mm256_cmp_ps::<_CMP_LE_OQ>(w, wmax);
-            let cover = _mm256_castps_si256(_mm256_and_ps(
-                _mm256_and_ps(_mm256_and_ps(m0, m1), _mm256_and_ps(m2, m3)),
-                m4,
-            ));
-            let key = _mm256_sub_epi32(ones, _mm256_castps_si256(w));
+            let (cover, key) = cover_and_key(&tv, x, [r0, r1, r2], rw);
             let (at, at2) = (v * wu + x0, v2 * wu + x0);
             let old = _mm256_loadu2_m128i(kp.add(at2) as *const __m128i, kp.add(at) as *const __m128i);
             let nearer = _mm256_cmpgt_epi32(_mm256_xor_si256(old, sign), _mm256_xor_si256(key, sign));
@@ -560,17 +546,7 @@ unsafe fn draw_rows_avx2(
         let mut u = x0;
         while u <= x1 {
             let x = _mm256_loadu_ps(px.add(u));
-            let m0 = _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_add_ps(_mm256_mul_ps(a0, x), r0), zero);
-            let m1 = _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_add_ps(_mm256_mul_ps(a1, x), r1), zero);
-            let m2 = _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_add_ps(_mm256_mul_ps(a2, x), r2), zero);
-            let w = _mm256_mul_ps(_mm256_add_ps(_mm256_mul_ps(n0, x), rw), inv_d);
-            let m3 = _mm256_cmp_ps::<_CMP_GE_OQ>(w, wmin);
-            let m4 = _mm256_cmp_ps::<_CMP_LE_OQ>(w, wmax);
-            let cover = _mm256_castps_si256(_mm256_and_ps(
-                _mm256_and_ps(_mm256_and_ps(m0, m1), _mm256_and_ps(m2, m3)),
-                m4,
-            ));
-            let key = _mm256_sub_epi32(ones, _mm256_castps_si256(w));
+            let (cover, key) = cover_and_key(&tv, x, [r0, r1, r2], rw);
             let at = v * wu + u;
             let old = _mm256_loadu_si256(kp.add(at) as *const __m256i);
             let nearer = _mm256_cmpgt_epi32(_mm256_xor_si256(old, sign), _mm256_xor_si256(key, sign));
@@ -581,6 +557,59 @@ unsafe fn draw_rows_avx2(
             u += LANES;
         }
     }
+}
+
+/// A triangle's [`RowConst`] broadcast to all lanes, for [`cover_and_key`].
+#[cfg(target_arch = "x86_64")]
+struct TriVecs {
+    a: [std::arch::x86_64::__m256; 3],
+    n0: std::arch::x86_64::__m256,
+    inv_d: std::arch::x86_64::__m256,
+    wmin: std::arch::x86_64::__m256,
+    wmax: std::arch::x86_64::__m256,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl TriVecs {
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    unsafe fn new(k: &RowConst) -> TriVecs {
+        use std::arch::x86_64::*;
+        TriVecs {
+            a: [_mm256_set1_ps(k.a[0]), _mm256_set1_ps(k.a[1]), _mm256_set1_ps(k.a[2])],
+            n0: _mm256_set1_ps(k.n0),
+            inv_d: _mm256_set1_ps(k.inv_d),
+            wmin: _mm256_set1_ps(k.wmin),
+            wmax: _mm256_set1_ps(k.wmax),
+        }
+    }
+}
+
+/// Coverage mask and depth key of the pixels whose ray coordinates are `x`, given the row
+/// constants `r` (edge functions) and `rw` (inverse depth): a pixel is covered when all three
+/// edge functions are ≥ 0 and its inverse depth lies in [wmin, wmax]; key = !bits(1/z), so a
+/// smaller key is nearer. The same IEEE operations, in the same order, as [`span_scalar`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn cover_and_key(
+    t: &TriVecs,
+    x: std::arch::x86_64::__m256,
+    r: [std::arch::x86_64::__m256; 3],
+    rw: std::arch::x86_64::__m256,
+) -> (std::arch::x86_64::__m256i, std::arch::x86_64::__m256i) {
+    use std::arch::x86_64::*;
+    let zero = _mm256_setzero_ps();
+    let m0 = _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_add_ps(_mm256_mul_ps(t.a[0], x), r[0]), zero);
+    let m1 = _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_add_ps(_mm256_mul_ps(t.a[1], x), r[1]), zero);
+    let m2 = _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_add_ps(_mm256_mul_ps(t.a[2], x), r[2]), zero);
+    let w = _mm256_mul_ps(_mm256_add_ps(_mm256_mul_ps(t.n0, x), rw), t.inv_d);
+    let m3 = _mm256_cmp_ps::<_CMP_GE_OQ>(w, t.wmin);
+    let m4 = _mm256_cmp_ps::<_CMP_LE_OQ>(w, t.wmax);
+    let cover =
+        _mm256_castps_si256(_mm256_and_ps(_mm256_and_ps(_mm256_and_ps(m0, m1), _mm256_and_ps(m2, m3)), m4));
+    let key = _mm256_sub_epi32(_mm256_set1_epi32(-1), _mm256_castps_si256(w));
+    (cover, key)
 }
 
 /// Loads the corners of triangles `t0 .. t0 + BATCH` (all in range) into `p`: one 16-byte

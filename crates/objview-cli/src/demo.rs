@@ -128,7 +128,7 @@ fn one_object(path: &Path, renders: &Path, cameras: &[Camera]) -> Result<Row> {
     let t = Instant::now();
     let name = path.file_stem().unwrap_or_default().to_string_lossy().to_string();
     let (mesh, transform) = load_normalized(path, Normalization::Unit)?;
-    let gt = crate::common::ground_truth(&mesh, &transform, None)?;
+    let gt = objview_geom::cloud::ground_truth(&mesh, &transform, None)?;
     let set = VoxelSet::from_points(&gt.points, DEFAULT_RESOLUTION)?;
     let vis = Visibility::new(&set, &mesh, VisibilityMode::Inverse);
     let mut acc = vec![0u64; set.len().div_ceil(64)];

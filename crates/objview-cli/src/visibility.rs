@@ -4,7 +4,7 @@
 use anyhow::Result;
 use clap::Parser;
 use objview_geom::normalize::{load_normalized, Normalization};
-use objview_geom::pose::VIEW_RADIUS as VIEW_RADIUS_DEFAULT;
+use objview_geom::pose::VIEW_RADIUS;
 use objview_render::{Camera, Intrinsics};
 use objview_views::ViewSet;
 use objview_voxel::{Visibility, VisibilityMode, VoxelSet, DEFAULT_RESOLUTION};
@@ -43,11 +43,11 @@ pub fn run(a: Args) -> Result<()> {
         a.resolution
     );
     let (mesh, transform) = load_normalized(&a.mesh, a.normalize)?;
-    let gt = crate::common::ground_truth(&mesh, &transform, a.gt_cloud.as_deref())?;
+    let gt = objview_geom::cloud::ground_truth(&mesh, &transform, a.gt_cloud.as_deref())?;
     let views = ViewSet::resolve(&a.views)?;
     let set = VoxelSet::from_points(&gt.points, a.resolution)?;
     let cameras: Vec<Camera> =
-        views.poses(VIEW_RADIUS_DEFAULT).into_iter().map(|p| Camera::new(p, Intrinsics::default())).collect();
+        views.poses(VIEW_RADIUS).into_iter().map(|p| Camera::new(p, Intrinsics::default())).collect();
     let vis = Visibility::new(&set, &mesh, a.mode);
     let per_view = vis.observe_all(&cameras);
     let union = objview_voxel::union(&per_view);
@@ -62,7 +62,7 @@ pub fn run(a: Args) -> Result<()> {
             "gt_points": gt.points.len(),
             "views": a.views,
             "num_views": views.len(),
-            "view_radius": VIEW_RADIUS_DEFAULT,
+            "view_radius": VIEW_RADIUS,
             "mode": a.mode.to_string(),
             "resolution": a.resolution,
         })),

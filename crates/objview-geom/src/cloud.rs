@@ -7,6 +7,7 @@
 //! benchmark scores against the same points. Writers ([`write_pcd_binary`],
 //! [`write_ply_points`]) export clouds for inspection and caching.
 
+use crate::normalize::Transform;
 use crate::npy::parse_npy_f64;
 use crate::{GeomError, Mesh};
 use rand::{Rng, SeedableRng};
@@ -457,6 +458,38 @@ fn write_all(path: &Path, bytes: &[u8]) -> Result<(), GeomError> {
     f.write_all(bytes).map_err(|e| GeomError::io(path, e))
 }
 
+/// A ground-truth cloud in the normalized object frame and where it came from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GroundTruth {
+    pub points: Vec<[f64; 3]>,
+    /// The file it was read from, or `sampled(seed=…, count=…)`.
+    pub source: String,
+}
+
+/// The ground-truth cloud of an object (SPEC §1): read from `path` (in the mesh file's frame,
+/// mapped into the normalized frame by `transform`), or, without a file, sampled on the
+/// (normalized) `mesh` with [`cloud_count`] points and [`DEFAULT_CLOUD_SEED`].
+pub fn ground_truth(
+    mesh: &Mesh,
+    transform: &Transform,
+    path: Option<&Path>,
+) -> Result<GroundTruth, GeomError> {
+    match path {
+        Some(p) => {
+            let mut points = read_cloud(p)?;
+            if *transform != Transform::IDENTITY {
+                points.iter_mut().for_each(|q| *q = transform.apply(*q));
+            }
+            Ok(GroundTruth { points, source: p.display().to_string() })
+        }
+        None => {
+            let n = cloud_count(mesh.surface_area());
+            let points = sample_surface(mesh, n, DEFAULT_CLOUD_SEED);
+            Ok(GroundTruth { points, source: format!("sampled(seed={DEFAULT_CLOUD_SEED}, count={n})") })
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -693,5 +726,22 @@ mod tests {
         assert_eq!(bits(&sample_surface(&m, 6000, 42)[..5000]), bits(&a));
         assert!(sample_surface(&m, 0, 1).is_empty());
         assert!(sample_surface(&Mesh::new(vec![[0.0; 3]; 3], vec![[0, 1, 2]]), 10, 1).is_empty());
+    }
+
+    #[test]
+    fn ground_truth_maps_files_and_samples_meshes() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("c.ply");
+        write_ply_points(&p, &[[2.0, 4.0, 6.0]]).unwrap();
+        let mesh = Mesh::new(vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], vec![[0, 1, 2]]);
+        let t = Transform { center: [1.0, 2.0, 3.0], scale: 0.5 };
+        let gt = ground_truth(&mesh, &t, Some(&p)).unwrap();
+        assert_eq!(gt.points, vec![[0.5, 1.0, 1.5]]);
+        assert_eq!(gt.source, p.display().to_string());
+        let gt = ground_truth(&mesh, &Transform::IDENTITY, None).unwrap();
+        // Area 0.5 / 0.004² = 31 250 points (inside the [20 000, 2 000 000] clamp).
+        assert_eq!(gt.points.len(), 31_250);
+        assert_eq!(gt.points, sample_surface(&mesh, 31_250, DEFAULT_CLOUD_SEED));
+        assert_eq!(gt.source, "sampled(seed=0, count=31250)");
     }
 }

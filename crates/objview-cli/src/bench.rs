@@ -17,6 +17,44 @@ pub enum Command {
     /// Depth rendering (one thread, all threads) on built-in meshes of ~10k, 100k and 1M
     /// triangles, and per-view O(v) in both visibility modes on a ~100k-triangle object.
     Render(RenderArgs),
+    /// Full difficulty annotation (26-size sweep + exact d_plan) of built-in objects of ~10k and
+    /// ~100k triangles: time per stage with one thread and all threads, peak memory.
+    Annotate(AnnotateBenchArgs),
+    /// How much d_plan, d_sat and r_vis move when the sampled ground-truth cloud is re-drawn
+    /// with other seeds, on the built-in pool.
+    Stability(StabilityArgs),
+}
+
+#[derive(Parser)]
+pub struct AnnotateBenchArgs {
+    /// Built-in objects to tessellate at each size (comma-separated, see `objview objects list`).
+    #[arg(long, value_delimiter = ',', default_value = "mug,gear")]
+    pub objects: Vec<String>,
+    /// Target triangle counts.
+    #[arg(long, value_delimiter = ',', default_value = "10000,100000")]
+    pub sizes: Vec<usize>,
+    /// Timed annotations per configuration (the median is reported).
+    #[arg(long, default_value_t = 3)]
+    pub repeats: usize,
+    /// Also write the figures as JSON.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+#[derive(Parser)]
+pub struct StabilityArgs {
+    /// Ground-truth sampling seeds (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "0,1,2")]
+    pub seeds: Vec<u64>,
+    /// Built-in objects (comma-separated; default: the whole built-in pool).
+    #[arg(long, value_delimiter = ',')]
+    pub objects: Vec<String>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Also write the per-object figures as JSON.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
 }
 
 #[derive(Parser)]
@@ -53,6 +91,8 @@ pub struct RenderArgs {
 pub fn run(cmd: Command) -> Result<()> {
     match cmd {
         Command::Render(a) => bench_render(a),
+        Command::Annotate(a) => crate::bench_annotate::bench_annotate(a),
+        Command::Stability(a) => crate::bench_annotate::bench_stability(a),
     }
 }
 

@@ -2,11 +2,17 @@
 //! arguments (clap), calls the library crates and prints or writes their results. Every error
 //! reaches the user as one line on stderr and a non-zero exit code.
 
+mod annotate;
 mod bench;
+mod bench_annotate;
 mod common;
 mod demo;
 mod feasibility;
 mod objects;
+mod pool;
+mod pool_build;
+mod pool_plot;
+mod pool_split;
 mod provenance;
 mod render;
 mod viewset;
@@ -32,6 +38,12 @@ enum Command {
     Visibility(visibility::Args),
     /// Evaluate a view space's feasibility rules on poses or a view set.
     Feasibility(feasibility::Args),
+    /// Difficulty annotation (SPEC §4): saturation curve, r_vis, d_sat and exact d_plan per object,
+    /// one JSON line each; resumable and shardable.
+    Annotate(annotate::Args),
+    /// The object pool: build, split, stats, plot (SPEC §6).
+    #[command(subcommand)]
+    Pool(pool::Command),
     /// Built-in procedural objects.
     #[command(subcommand)]
     Objects(objects::Command),
@@ -63,6 +75,8 @@ fn main() {
         Command::Viewset(c) => viewset::run(c),
         Command::Visibility(a) => visibility::run(a),
         Command::Feasibility(a) => feasibility::run(a),
+        Command::Annotate(a) => annotate::run(a),
+        Command::Pool(c) => pool::run(c),
         Command::Objects(c) => objects::run(c),
         Command::Bench(c) => bench::run(c),
         Command::Demo(a) => demo::run(a),

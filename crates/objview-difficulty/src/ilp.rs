@@ -8,11 +8,18 @@
 //!    deterministic greedy cover (reported as `greedy_size`);
 //! 2. apply the optimum-preserving reductions ([`CoverInstance::reduce`]): forced, dominated and
 //!    empty views, dominated elements;
-//! 3. solve the LP relaxation of the reduced instance (`lp_bound`), then the ILP
-//!    `min Σ x_v  s.t.  Σ_{v ∋ e} x_v ≥ 1 ∀e, x_v ∈ {0,1}` with HiGHS, warm-started from the greedy
-//!    cover of the reduced instance; the incumbent starts as the better of the greedy covers of
-//!    the original and of the reduced instance;
-//! 4. lift the reduced solution back (forced ∪ chosen) and verify that it covers U.
+//! 3. solve the LP relaxation of the reduced instance with HiGHS (`lp_bound`);
+//! 4. method `auto` (default): the exact combinatorial search of [`crate::search`] (≤ 128
+//!    views) from ⌈LP⌉ up, for at most [`SEARCH_SHARE`] of the time limit; it usually proves the
+//!    optimum (it is much faster than branch and bound on these instances, see that module);
+//! 5. otherwise (method `ilp`, more than 128 views, or the search ran out of its time share) the
+//!    ILP `min Σ x_v  s.t.  Σ_{v ∋ e} x_v ≥ 1 ∀e, x_v ∈ {0,1}` with HiGHS, warm-started from the
+//!    best cover so far, with the search's proven bound kept; the incumbent starts as the better
+//!    of the greedy covers of the original and of the reduced instance;
+//! 6. lift the reduced solution back (forced ∪ chosen) and verify that it covers U.
+//!
+//! Both exact methods give the same d_plan (tested against each other and against brute force);
+//! `method` in the result says which one proved it.
 //!
 //! Status semantics: `d_plan` is `Some` only when HiGHS reports the ILP optimal (relative gap 0).
 //! A run stopped by the time limit is [`CoverStatus::TimeLimit`]: it reports the best cover found
@@ -44,11 +51,44 @@ use crate::setcover::{CoverInstance, Reduction};
 pub const DEFAULT_TIME_LIMIT_S: f64 = 300.0;
 /// Default HiGHS `random_seed`.
 pub const DEFAULT_RANDOM_SEED: i32 = 0;
+/// Share of the time limit the combinatorial search may use before the ILP takes over.
+pub const SEARCH_SHARE: f64 = 0.5;
 /// Tolerance when rounding fractional bounds up to integers (⌈x − tol⌉).
 pub const BOUND_ROUNDING_TOL: f64 = 1e-6;
 
 /// Serializes HiGHS solves within the process (see the module docs).
 static HIGHS_LOCK: Mutex<()> = Mutex::new(());
+
+/// Which exact method proves d_plan.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CoverMethod {
+    /// Combinatorial search first (≤ 128 views), the HiGHS ILP if the search runs out of time.
+    #[default]
+    Auto,
+    /// The HiGHS ILP only.
+    Ilp,
+}
+
+impl std::str::FromStr for CoverMethod {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "auto" => Ok(CoverMethod::Auto),
+            "ilp" => Ok(CoverMethod::Ilp),
+            other => Err(format!("unknown cover method '{other}' (expected 'auto' or 'ilp')")),
+        }
+    }
+}
+
+impl std::fmt::Display for CoverMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            CoverMethod::Auto => "auto",
+            CoverMethod::Ilp => "ilp",
+        })
+    }
+}
 
 /// Settings of [`solve_min_cover`], recorded in every [`CoverResult`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -62,6 +102,9 @@ pub struct CoverSettings {
     pub threads: usize,
     /// HiGHS `random_seed` (fixed for determinism).
     pub random_seed: i32,
+    /// Exact method.
+    #[serde(default)]
+    pub method: CoverMethod,
 }
 
 impl Default for CoverSettings {
@@ -71,6 +114,7 @@ impl Default for CoverSettings {
             min_views_per_element: 1,
             threads: 1,
             random_seed: DEFAULT_RANDOM_SEED,
+            method: CoverMethod::Auto,
         }
     }
 }
@@ -195,6 +239,13 @@ pub struct CoverResult {
     pub solver_seconds: f64,
     /// What the reductions removed.
     pub reduction: ReductionStats,
+    /// What proved the result: `reductions` (forced views cover U), `search`, `ilp`, or `none`
+    /// (not proven).
+    pub proven_by: String,
+    /// Nodes of the combinatorial search (0 if it did not run).
+    pub search_nodes: u64,
+    /// Wall-clock time of the combinatorial search, seconds.
+    pub search_seconds: f64,
 }
 
 /// Minimum set cover of the universe seen by `views` (per-view bitsets over element ids, bit i of
@@ -238,11 +289,17 @@ pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<C
         seconds: 0.0,
         solver_seconds: 0.0,
         reduction: ReductionStats::from(&red),
+        proven_by: "none".into(),
+        search_nodes: 0,
+        search_seconds: 0.0,
     };
+    // The best cover of the reduced instance (view ids), the warm start of the ILP.
+    let mut best_reduced = reduced_greedy.clone();
 
     if reduced.n_elements() == 0 {
         // The forced views cover everything: the reductions alone prove optimality.
         best = red.lift(&[]);
+        result.proven_by = "reductions".into();
     } else {
         let matrix = column_rows(reduced);
         // Trivial bound until the LP says more: at least one more view is needed.
@@ -266,9 +323,35 @@ pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<C
             }
         }
 
-        if result.status == CoverStatus::Optimal {
-            // Warm start: the greedy cover of the reduced instance (feasible there by construction).
-            let start_cols = position_mask(reduced, &reduced_greedy);
+        let mut proven = false;
+        if result.status == CoverStatus::Optimal && settings.method == CoverMethod::Auto {
+            let budget = (settings.time_limit_s * SEARCH_SHARE).min(remaining());
+            let t = Instant::now();
+            let deadline = t.checked_add(std::time::Duration::from_secs_f64(budget.min(1e9)));
+            let lower = result.lower_bound - forced;
+            if let Some(out) = crate::search::search_min_cover(reduced, lower, &best_reduced, deadline) {
+                result.search_nodes = out.nodes;
+                result.search_seconds = t.elapsed().as_secs_f64();
+                let lifted = red.lift(&out.cover);
+                if lifted.len() < best.len() || out.optimal {
+                    best_reduced = out.cover.clone();
+                    best = if lifted.len() <= best.len() { lifted } else { best };
+                }
+                result.lower_bound = result.lower_bound.max(forced + out.lower_bound);
+                if out.optimal {
+                    proven = true;
+                    result.lower_bound = best.len();
+                    result.proven_by = "search".into();
+                }
+            }
+        }
+
+        if result.status == CoverStatus::Optimal && !proven && remaining() <= 0.0 {
+            result.status = CoverStatus::TimeLimit;
+        }
+        if result.status == CoverStatus::Optimal && !proven {
+            // Warm start: the best cover of the reduced instance (feasible there by construction).
+            let start_cols = position_mask(reduced, &best_reduced);
             let mip = solve_ilp(&matrix, reduced.n_elements(), &start_cols, settings, remaining());
             if let Some(bound) = mip.dual_bound.filter(|b| b.is_finite()) {
                 result.mip_dual_bound = Some(forced as f64 + bound);
@@ -288,6 +371,7 @@ pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<C
                     Some(cover) if cover.len() <= best.len() => {
                         best = cover;
                         result.lower_bound = best.len();
+                        result.proven_by = "ilp".into();
                         CoverStatus::Optimal
                     }
                     Some(cover) => CoverStatus::Error(format!(

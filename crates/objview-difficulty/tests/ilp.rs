@@ -6,7 +6,7 @@ mod common;
 
 use common::caps;
 use objview_difficulty::{
-    solve_min_cover, CoverInstance, CoverResult, CoverSettings, CoverStatus, DifficultyError,
+    solve_min_cover, CoverInstance, CoverMethod, CoverResult, CoverSettings, CoverStatus, DifficultyError,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -77,13 +77,23 @@ fn matches_brute_force_on_random_small_instances() {
         for v in &mut views {
             v.resize(span, 0);
         }
-        let r = solve_min_cover(&views, &settings(k)).unwrap();
         let inst = CoverInstance::from_bitsets(&views, k).unwrap();
         let oracle = inst.brute_force().unwrap();
-        assert_eq!(r.status, CoverStatus::Optimal, "case {case}: {r:?}");
-        assert_eq!(r.d_plan, Some(oracle.len()), "case {case}: ILP vs brute force");
-        check_consistent(&views, k, &r);
-        assert!(r.lp_solved);
+        // Both exact methods: the default (search, ILP fallback) and the ILP alone.
+        for method in [CoverMethod::Auto, CoverMethod::Ilp] {
+            let r = solve_min_cover(&views, &CoverSettings { method, ..settings(k) }).unwrap();
+            assert_eq!(r.status, CoverStatus::Optimal, "case {case} {method}: {r:?}");
+            assert_eq!(r.d_plan, Some(oracle.len()), "case {case}: {method} vs brute force");
+            check_consistent(&views, k, &r);
+            assert!(r.lp_solved);
+            if method == CoverMethod::Ilp {
+                assert_eq!(r.search_nodes, 0);
+                assert!(r.proven_by == "ilp" || r.proven_by == "reductions", "{}", r.proven_by);
+            } else {
+                assert!(r.proven_by == "search" || r.proven_by == "reductions", "{}", r.proven_by);
+            }
+        }
+        let r = solve_min_cover(&views, &settings(k)).unwrap();
         greedy_beaten += usize::from(r.best_size < r.greedy_size);
         checked += 1;
     }
@@ -160,6 +170,11 @@ fn spherical_cap_instance_128_views_solves_to_optimality() {
     let views = caps::cap_instance(30_000, 60.0, 7);
     let r = solve_min_cover(&views, &settings(1)).unwrap();
     check_consistent(&views, 1, &r);
+    // The ILP alone proves the same optimum.
+    let ilp = solve_min_cover(&views, &CoverSettings { method: CoverMethod::Ilp, ..settings(1) }).unwrap();
+    check_consistent(&views, 1, &ilp);
+    assert_eq!((ilp.status.clone(), ilp.d_plan), (CoverStatus::Optimal, r.d_plan));
+    assert_eq!(ilp.proven_by, "ilp");
     assert_eq!(r.status, CoverStatus::Optimal, "{r:?}");
     assert!(r.universe > 29_000, "universe {}", r.universe);
     assert!(r.d_plan.unwrap() < r.greedy_size, "greedy {} is optimal here?", r.greedy_size);

@@ -1,0 +1,43 @@
+//! Error type of the figure layer. Every variant names what it is about (the output file, the
+//! object uid, the setting) and the reason, so that a failed figure is diagnosable from one line.
+
+use std::path::PathBuf;
+
+use thiserror::Error;
+
+/// Errors of drawing and writing figures.
+#[derive(Debug, Error)]
+pub enum PlotError {
+    /// Creating a folder or writing a file failed.
+    #[error("{path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    /// The drawing backend failed (plotters), or a PNG could not be encoded; `target` is the
+    /// output file, or `PNG`/`SVG` for an in-memory rendering.
+    #[error("{target}: drawing failed: {reason}")]
+    Draw { target: String, reason: String },
+    /// The embedded font could not be loaded (a broken build, not a user error).
+    #[error("embedded font {name}: {reason}")]
+    Font { name: &'static str, reason: String },
+    /// A chart cannot be drawn as described (no finite point on a log axis, mismatched labels, …).
+    #[error("chart '{title}': {reason}")]
+    InvalidChart { title: String, reason: String },
+    /// There is nothing to plot.
+    #[error("no annotations to plot (every input line was a failure, or the inputs are empty)")]
+    NoAnnotations,
+    /// An annotation cannot be plotted (empty curve, zero surface, …).
+    #[error("annotation '{uid}': {reason}")]
+    BadAnnotation { uid: String, reason: String },
+    /// The annotations were produced with different values of a setting the figure depends on.
+    #[error("annotations disagree on setting {key}: '{first_uid}' has {first}, '{other_uid}' has {other}")]
+    InconsistentSettings { key: String, first_uid: String, first: String, other_uid: String, other: String },
+    /// A setting is out of range.
+    #[error("invalid setting {name}: {reason}")]
+    InvalidSetting { name: &'static str, reason: String },
+}
+
+impl PlotError {
+    /// Shorthand for [`PlotError::Io`].
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        PlotError::Io { path: path.into(), source }
+    }
+}

@@ -52,6 +52,9 @@ pub struct StabilityArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Exact d_plan time limit per annotation, seconds (objects that reach it show `?`).
+    #[arg(long, default_value_t = 60.0)]
+    pub time_limit: f64,
     /// Also write the per-object figures as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,

@@ -60,6 +60,7 @@ fn stage_medians(runs: &[Annotation]) -> StageTimings {
         visibility: m(|t| t.visibility),
         fit: m(|t| t.fit),
         cover: m(|t| t.cover),
+        cover_lock_wait: m(|t| t.cover_lock_wait),
     }
 }
 
@@ -153,7 +154,9 @@ pub fn bench_stability(a: StabilityArgs) -> Result<()> {
     let dir = tempfile::tempdir()?;
     let objects: Vec<ObjectRef> =
         names.iter().map(|n| write_object(n, 0, dir.path())).collect::<Result<_>>()?;
-    let base = AnnotateSettings::default();
+    let mut base = AnnotateSettings::default();
+    base.cover.time_limit_s = a.time_limit;
+    base.validate()?;
     let views = GridViews::new(base.view_radius)?;
     let threads = a.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads.max(1)).build()?;

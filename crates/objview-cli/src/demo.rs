@@ -1,9 +1,13 @@
-//! `objview demo`: the main job on the built-in objects. Today it runs the geometry layer end to
-//! end: synthesize the pool, load and normalize every object, sample its ground-truth cloud,
-//! render the start view (depth NPY + preview PNG), and compute the observable surface of
-//! every object over tammes-128 in `inverse` mode (|S_gt|, |∪O(v)|, their ratio). It writes
-//! `summary.json` and prints a table. Later stages (annotation, splits, episodes, reports)
-//! extend this command.
+//! `objview demo`: the main job on the built-in objects, end to end:
+//! 1. synthesize the pool; load and normalize every object, sample its ground-truth cloud,
+//!    render the start view (depth NPY + preview PNG) and compute its observable surface over
+//!    tammes-128 in `inverse` mode (`summary.json`, a table);
+//! 2. annotate every object's difficulty (SPEC §4: r_vis, d_sat, exact d_plan) into
+//!    `annotations.jsonl` (resumable: a re-run skips finished objects);
+//! 3. split the pool (SPEC §6) into `splits/`, print its statistics, and draw Figure 2 into
+//!    `figures/`.
+//!
+//! Later stages (episodes, baselines, reports) extend this command.
 
 use anyhow::{Context, Result};
 use clap::Parser;
@@ -27,6 +31,15 @@ pub struct Args {
     /// View set for the observable-surface sweep.
     #[arg(long, default_value = "tammes-128")]
     pub views: String,
+    /// Exact d_plan time limit per object in the annotation stage, seconds.
+    #[arg(long, default_value_t = 30.0)]
+    pub time_limit: f64,
+    /// Only these built-in objects (comma-separated names; default: all).
+    #[arg(long, value_delimiter = ',')]
+    pub objects: Vec<String>,
+    /// Stop after the geometry stage (no annotation, splits or figures).
+    #[arg(long)]
+    pub geometry_only: bool,
 }
 
 struct Row {
@@ -44,8 +57,17 @@ pub fn run(a: Args) -> Result<()> {
     let objects_dir = a.out.join("objects");
     let renders_dir = a.out.join("renders");
     std::fs::create_dir_all(&renders_dir).with_context(|| format!("creating {}", renders_dir.display()))?;
-    let paths = objview_geom::synth::write_pool(&objects_dir)?;
-    println!("[1/3] synthesized {} built-in objects into {}", paths.len(), objects_dir.display());
+    let mut paths = objview_geom::synth::write_pool(&objects_dir)?;
+    for name in &a.objects {
+        anyhow::ensure!(
+            objview_geom::synth::find(name).is_some(),
+            "--objects: no built-in object named {name:?} (see `objview objects list`)"
+        );
+    }
+    if !a.objects.is_empty() {
+        paths.retain(|p| a.objects.iter().any(|n| p.file_stem().is_some_and(|s| s == n.as_str())));
+    }
+    println!("[1/6] synthesized {} built-in objects into {}", paths.len(), objects_dir.display());
     let views = ViewSet::resolve(&a.views)?;
     let cameras: Vec<Camera> =
         views.poses(VIEW_RADIUS).into_iter().map(|p| Camera::new(p, Intrinsics::default())).collect();
@@ -60,7 +82,7 @@ pub fn run(a: Args) -> Result<()> {
         })
         .collect();
     bar.finish_and_clear();
-    println!("[2/3] rendered the start view and swept {} ({} views) per object", a.views, views.len());
+    println!("[2/6] rendered the start view and swept {} ({} views) per object", a.views, views.len());
 
     let mut ok = Vec::new();
     let mut failed = Vec::new();
@@ -113,7 +135,7 @@ pub fn run(a: Args) -> Result<()> {
     let summary_path = a.out.join("summary.json");
     crate::common::write_json(&summary_path, &summary)?;
     println!(
-        "\n[3/3] wrote {} ({} objects, {} failed); start-view depth + previews in {}; {:.1} s, {} seconds per object on average",
+        "\n[3/6] wrote {} ({} objects, {} failed); start-view depth + previews in {}; {:.1} s, {} seconds per object on average",
         summary_path.display(),
         ok.len(),
         failed.len(),
@@ -121,6 +143,54 @@ pub fn run(a: Args) -> Result<()> {
         t0.elapsed().as_secs_f64(),
         format_args!("{:.2}", ok.iter().map(|r| r.seconds).sum::<f64>() / ok.len().max(1) as f64)
     );
+    if a.geometry_only {
+        return Ok(());
+    }
+    difficulty_stages(&a, &paths, t0)
+}
+
+/// Stages 4–6: annotate, split + stats, figures.
+fn difficulty_stages(a: &Args, objects: &[PathBuf], t0: Instant) -> Result<()> {
+    let annotations = a.out.join("annotations.jsonl");
+    println!("\n[4/6] annotating the difficulty of every object (SPEC §4) into {}", annotations.display());
+    crate::annotate::run(crate::annotate::Args {
+        inputs: objects.to_vec(),
+        out: annotations.clone(),
+        normalize: Normalization::Unit,
+        gt_cloud_dir: None,
+        gt_seed: objview_geom::cloud::DEFAULT_CLOUD_SEED,
+        visibility: VisibilityMode::Inverse,
+        resolution: DEFAULT_RESOLUTION,
+        threads: None,
+        shard: None,
+        time_limit: a.time_limit,
+        min_views: 1,
+        cover_method: objview_difficulty::CoverMethod::Auto,
+        retry_failed: false,
+    })?;
+    let splits = a.out.join("splits");
+    println!("\n[5/6] splitting the pool (SPEC §6) into {}", splits.display());
+    crate::pool_split::run_split(crate::pool_split::SplitArgs {
+        annotations: vec![annotations.clone()],
+        out_dir: splits.clone(),
+        seed: 0,
+        test_fraction: objview_pool::split::DEFAULT_TEST_FRACTION,
+        train_size: None,
+    })?;
+    println!();
+    crate::pool_split::run_stats(crate::pool_split::StatsArgs {
+        annotations: vec![annotations.clone()],
+        splits: Some(splits),
+        json: false,
+    })?;
+    let figures = a.out.join("figures");
+    println!("\n[6/6] drawing Figure 2 into {}", figures.display());
+    crate::pool_plot::run(crate::pool_plot::Args {
+        annotations: vec![annotations],
+        out: figures,
+        representatives: 6,
+    })?;
+    println!("\ndemo finished in {:.1} s", t0.elapsed().as_secs_f64());
     Ok(())
 }
 

@@ -34,9 +34,11 @@
 //! Determinism: HiGHS runs on one thread with a fixed random seed, so an input solved to
 //! optimality always yields the same chosen views (HiGHS picks one of possibly several minimum
 //! covers; which one may change with the HiGHS version, pinned by Cargo.lock). Runs stopped by the
-//! time limit depend on machine speed. HiGHS calls are serialized process-wide by a lock: HiGHS
-//! keeps global scheduler state, and concurrent solves from several threads are not known to be
-//! safe. Time spent waiting for that lock is not counted against the time limit.
+//! time limit depend on machine speed. HiGHS calls (the LP and the ILP, not the reductions or
+//! the search) are serialized process-wide by a lock: HiGHS keeps global scheduler state, and
+//! concurrent solves from several threads have been reported unsafe (HiGHS PR #3141). Time spent
+//! waiting for that lock is reported (`lock_wait_seconds`) and not counted against the time
+//! limit nor in `seconds`.
 
 use std::sync::{Mutex, PoisonError};
 use std::time::Instant;
@@ -233,19 +235,23 @@ pub struct CoverResult {
     pub mip_dual_bound: Option<f64>,
     /// Size of the deterministic greedy cover of the original instance.
     pub greedy_size: usize,
-    /// Total wall-clock time of the solve (after acquiring the solver lock), seconds.
+    /// Total wall-clock time of the solve, without waits for the HiGHS lock, seconds.
     pub seconds: f64,
     /// Wall-clock time spent inside HiGHS (LP + ILP), seconds.
     pub solver_seconds: f64,
     /// What the reductions removed.
     pub reduction: ReductionStats,
-    /// What proved the result: `reductions` (forced views cover U), `search`, `ilp`, or `none`
-    /// (not proven).
+    /// What proved the result: `reductions` (forced views cover U), `search`, `ilp`,
+    /// `search+ilp` (a bound of one method met a cover of the other), or `none` (not proven).
     pub proven_by: String,
     /// Nodes of the combinatorial search (0 if it did not run).
     pub search_nodes: u64,
     /// Wall-clock time of the combinatorial search, seconds.
     pub search_seconds: f64,
+    /// Time spent waiting for another thread's HiGHS call, seconds (not in `seconds`, not
+    /// counted against the time limit).
+    #[serde(default)]
+    pub lock_wait_seconds: f64,
 }
 
 /// Minimum set cover of the universe seen by `views` (per-view bitsets over element ids, bit i of
@@ -255,9 +261,10 @@ pub struct CoverResult {
 /// Errors only on invalid settings; solver failures are reported in [`CoverResult::status`].
 pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<CoverResult, DifficultyError> {
     settings.validate()?;
-    let _lock = HIGHS_LOCK.lock().unwrap_or_else(PoisonError::into_inner);
     let start = Instant::now();
-    let remaining = || (settings.time_limit_s - start.elapsed().as_secs_f64()).max(0.0);
+    // Seconds spent waiting for the HiGHS lock: not counted against the time limit.
+    let waited = std::cell::Cell::new(0.0f64);
+    let remaining = || (settings.time_limit_s - (start.elapsed().as_secs_f64() - waited.get())).max(0.0);
 
     let inst = CoverInstance::from_bitsets(views, settings.min_views_per_element)?;
     let mut greedy = inst.greedy();
@@ -292,6 +299,7 @@ pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<C
         proven_by: "none".into(),
         search_nodes: 0,
         search_seconds: 0.0,
+        lock_wait_seconds: 0.0,
     };
     // The best cover of the reduced instance (view ids), the warm start of the ILP.
     let mut best_reduced = reduced_greedy.clone();
@@ -306,10 +314,16 @@ pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<C
         result.lp_bound = (forced + 1) as f64;
         result.lower_bound = forced + 1;
         let solver_start = Instant::now();
+        let waited_before = waited.get();
 
-        let lp = solve_relaxation(&matrix, reduced.n_elements(), settings, remaining());
+        let lp = {
+            let _lock = highs_lock(&waited);
+            solve_relaxation(&matrix, reduced.n_elements(), settings, remaining())
+        };
+        let mut lp_values: Vec<f64> = Vec::new();
         match lp {
-            Ok(Some(value)) => {
+            Ok(Some((value, columns))) => {
+                lp_values = columns;
                 result.lp_bound = forced as f64 + value;
                 result.lower_bound = result.lower_bound.max(forced + ceil_bound(value));
             }
@@ -329,7 +343,9 @@ pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<C
             let t = Instant::now();
             let deadline = t.checked_add(std::time::Duration::from_secs_f64(budget.min(1e9)));
             let lower = result.lower_bound - forced;
-            if let Some(out) = crate::search::search_min_cover(reduced, lower, &best_reduced, deadline) {
+            if let Some(out) =
+                crate::search::search_min_cover(reduced, lower, &best_reduced, &lp_values, deadline)
+            {
                 result.search_nodes = out.nodes;
                 result.search_seconds = t.elapsed().as_secs_f64();
                 let lifted = red.lift(&out.cover);
@@ -352,7 +368,10 @@ pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<C
         if result.status == CoverStatus::Optimal && !proven {
             // Warm start: the best cover of the reduced instance (feasible there by construction).
             let start_cols = position_mask(reduced, &best_reduced);
-            let mip = solve_ilp(&matrix, reduced.n_elements(), &start_cols, settings, remaining());
+            let mip = {
+                let _lock = highs_lock(&waited);
+                solve_ilp(&matrix, reduced.n_elements(), &start_cols, settings, remaining())
+            };
             if let Some(bound) = mip.dual_bound.filter(|b| b.is_finite()) {
                 result.mip_dual_bound = Some(forced as f64 + bound);
                 result.lower_bound = result.lower_bound.max(forced + ceil_bound(bound));
@@ -392,10 +411,17 @@ pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<C
                 Err(message) => CoverStatus::Error(message),
             };
         }
-        result.solver_seconds = solver_start.elapsed().as_secs_f64();
+        result.solver_seconds =
+            solver_start.elapsed().as_secs_f64() - (waited.get() - waited_before) - result.search_seconds;
     }
 
     debug_assert!(inst.is_cover(&best), "the incumbent is always a cover");
+    // A stopped run whose proven bound (search and/or ILP) meets the best cover (found by the
+    // other method) has proven it minimum after all.
+    if result.status == CoverStatus::TimeLimit && result.lower_bound == best.len() {
+        result.status = CoverStatus::Optimal;
+        result.proven_by = "search+ilp".into();
+    }
     // A bound above a valid cover would be a solver inconsistency; never report it.
     if result.lower_bound > best.len() {
         if result.status == CoverStatus::Optimal || result.status == CoverStatus::TimeLimit {
@@ -413,8 +439,17 @@ pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<C
     }
     result.best_size = best.len();
     result.best_cover = best;
-    result.seconds = start.elapsed().as_secs_f64();
+    result.seconds = start.elapsed().as_secs_f64() - waited.get();
+    result.lock_wait_seconds = waited.get();
     Ok(result)
+}
+
+/// Takes the process-wide HiGHS lock, adding the time spent waiting to `waited`.
+fn highs_lock(waited: &std::cell::Cell<f64>) -> std::sync::MutexGuard<'static, ()> {
+    let t = Instant::now();
+    let guard = HIGHS_LOCK.lock().unwrap_or_else(PoisonError::into_inner);
+    waited.set(waited.get() + t.elapsed().as_secs_f64());
+    guard
 }
 
 /// ⌈x − tol⌉ for a non-negative bound of an integer-valued objective.
@@ -480,17 +515,19 @@ fn build_model(
     Ok(model)
 }
 
-/// LP relaxation optimum; `Ok(None)` when the time limit stopped it.
+/// LP relaxation optimum and its column values; `Ok(None)` when the time limit stopped it.
 fn solve_relaxation(
     matrix: &[Vec<usize>],
     n_rows: usize,
     settings: &CoverSettings,
     time_limit: f64,
-) -> Result<Option<f64>, String> {
+) -> Result<Option<(f64, Vec<f64>)>, String> {
     let model = build_model(matrix, n_rows, false, settings, time_limit)?;
     let solved = model.try_solve().map_err(|s| format!("HiGHS run failed: {s:?}"))?;
     match solved.status() {
-        HighsModelStatus::Optimal => Ok(Some(solved.objective_value())),
+        HighsModelStatus::Optimal => {
+            Ok(Some((solved.objective_value(), solved.get_solution().columns().to_vec())))
+        }
         HighsModelStatus::ReachedTimeLimit => Ok(None),
         other => Err(format!("HiGHS model status {other:?}")),
     }

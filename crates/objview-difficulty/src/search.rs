@@ -51,11 +51,15 @@ pub struct SearchOutcome {
 ///
 /// `lower` is a known lower bound (e.g. ⌈LP⌉; 0 if none), `incumbent` a known cover (view ids);
 /// the search tries sizes from the larger of `lower` and its own root bound up to
-/// `incumbent.len() − 1`. Stops at `deadline` (if any) with `optimal = false`.
+/// `incumbent.len() − 1`. `priority` (one value per column of `inst`, e.g. the LP relaxation's
+/// solution; empty for none) orders the branches: higher first, then more rows covered. It
+/// changes how fast a cover is found, never the optimum. Stops at `deadline` (if any) with
+/// `optimal = false`.
 pub fn search_min_cover(
     inst: &CoverInstance,
     lower: usize,
     incumbent: &[usize],
+    priority: &[f64],
     deadline: Option<Instant>,
 ) -> Option<SearchOutcome> {
     let n_views = inst.n_views();
@@ -82,8 +86,24 @@ pub fn search_min_cover(
     masks.dedup();
     let all: u128 = if n_views == 128 { u128::MAX } else { (1u128 << n_views) - 1 };
 
-    let mut s =
-        Search { masks, levels: vec![Vec::new(); n_views + 2], nodes: 0, deadline, stopped: false, found: 0 };
+    // Priority ranks: 0 = highest priority value (ties by column).
+    let mut rank = vec![0u32; n_views];
+    if priority.len() == n_views {
+        let mut cols: Vec<usize> = (0..n_views).collect();
+        cols.sort_by(|&a, &b| priority[b].total_cmp(&priority[a]).then(a.cmp(&b)));
+        for (r, &c) in cols.iter().enumerate() {
+            rank[c] = r as u32;
+        }
+    }
+    let mut s = Search {
+        rank,
+        masks,
+        levels: vec![Vec::new(); n_views + 2],
+        nodes: 0,
+        deadline,
+        stopped: false,
+        found: 0,
+    };
     let root: Vec<u32> = (0..s.masks.len() as u32).collect();
     let root_bound = s.packing(&root, all) as usize;
     let mut k = lower.max(root_bound).max(1);
@@ -116,6 +136,8 @@ fn ones(mut m: u128) -> impl Iterator<Item = usize> {
 }
 
 struct Search {
+    /// Per column: its priority rank (lower first; all 0 without priorities).
+    rank: Vec<u32>,
     /// Per row: the views covering it, sorted by view count.
     masks: Vec<u128>,
     /// Uncovered rows per depth (buffers reused across nodes).
@@ -206,7 +228,10 @@ impl Search {
                 }
             }
         }
-        order.sort_unstable_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
+        let rank = &self.rank;
+        order.sort_unstable_by(|a, b| {
+            rank[a.1 as usize].cmp(&rank[b.1 as usize]).then(b.0.cmp(&a.0)).then(a.1.cmp(&b.1))
+        });
         let mut allowed = allowed;
         for &(_, v) in &order {
             let bit = 1u128 << v;
@@ -249,11 +274,16 @@ mod tests {
             let inst = inst(&views);
             let brute = inst.brute_force().unwrap();
             let greedy = inst.greedy();
-            let out = search_min_cover(&inst, 0, &greedy, None).unwrap();
+            let out = search_min_cover(&inst, 0, &greedy, &[], None).unwrap();
             assert!(out.optimal, "case {case}");
             assert_eq!(out.cover.len(), brute.len(), "case {case}: {views:?}");
             assert!(inst.is_cover(&out.cover), "case {case}");
             assert_eq!(out.lower_bound, brute.len());
+            // Branch priorities change the order of the search, never the optimum.
+            let priority: Vec<f64> = (0..inst.n_views()).map(|_| rng.gen_range(0.0..1.0)).collect();
+            let out = search_min_cover(&inst, 0, &greedy, &priority, None).unwrap();
+            assert_eq!((out.cover.len(), out.optimal), (brute.len(), true), "case {case} with priorities");
+            assert!(inst.is_cover(&out.cover));
         }
     }
 
@@ -263,10 +293,10 @@ mod tests {
         let inst = inst(&[vec![0, 1, 2, 3, 6], vec![4, 5, 7, 8, 9], vec![0, 1, 4, 5, 2, 7]]);
         let greedy = inst.greedy();
         assert_eq!(greedy.len(), 3);
-        let out = search_min_cover(&inst, 0, &greedy, None).unwrap();
+        let out = search_min_cover(&inst, 0, &greedy, &[], None).unwrap();
         assert_eq!((out.cover.clone(), out.optimal, out.lower_bound), (vec![0, 1], true, 2));
         // A lower bound equal to the incumbent proves it immediately.
-        let out = search_min_cover(&inst, 2, &[0, 1], None).unwrap();
+        let out = search_min_cover(&inst, 2, &[0, 1], &[], None).unwrap();
         assert_eq!((out.optimal, out.nodes), (true, 0));
     }
 
@@ -276,7 +306,7 @@ mod tests {
         let views: Vec<Vec<usize>> = (0..128).map(|v| vec![v, (v + 127) % 128]).collect();
         let inst = inst(&views);
         let greedy = inst.greedy();
-        let out = search_min_cover(&inst, 0, &greedy, None).unwrap();
+        let out = search_min_cover(&inst, 0, &greedy, &[], None).unwrap();
         assert!(out.optimal);
         assert_eq!(out.cover.len(), 64);
         // The root packing bound already proves 64 (64 disjoint pairs).
@@ -285,7 +315,7 @@ mod tests {
         // An instance too large for the search.
         let big: Vec<Vec<usize>> = (0..129).map(|v| vec![v]).collect();
         let big = inst_of(&big);
-        assert!(search_min_cover(&big, 0, &(0..129).collect::<Vec<_>>(), None).is_none());
+        assert!(search_min_cover(&big, 0, &(0..129).collect::<Vec<_>>(), &[], None).is_none());
 
         // A deadline in the past stops the search on its first check with a valid bound.
         let mut rng = ChaCha8Rng::seed_from_u64(3);
@@ -293,7 +323,7 @@ mod tests {
             (0..128).map(|_| (0..2000).filter(|_| rng.gen_bool(0.05)).collect()).collect();
         let hard = inst_of(&views);
         let g = hard.greedy();
-        let out = search_min_cover(&hard, 0, &g, Some(Instant::now())).unwrap();
+        let out = search_min_cover(&hard, 0, &g, &[], Some(Instant::now())).unwrap();
         if !out.optimal {
             assert_eq!(out.cover.len(), g.len());
             assert!(out.lower_bound < g.len());

@@ -54,6 +54,10 @@ fn check_consistent(views: &[Vec<u64>], k: usize, r: &CoverResult) {
             assert_eq!(r.d_plan, Some(r.best_size));
             assert_eq!(r.lower_bound, r.best_size);
         }
+        CoverStatus::TimeLimit => {
+            assert_eq!(r.d_plan, None, "d_plan must be None unless proven optimal");
+            assert!(r.lower_bound < r.best_size, "a closed gap must be reported optimal: {r:?}");
+        }
         _ => assert_eq!(r.d_plan, None, "d_plan must be None unless proven optimal"),
     }
 }

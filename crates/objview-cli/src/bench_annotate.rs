@@ -208,7 +208,7 @@ pub fn bench_stability(a: StabilityArgs) -> Result<()> {
         let solved: Vec<usize> = dp.iter().flatten().copied().collect();
         let dp_spread = solved.iter().max().zip(solved.iter().min()).map_or(0, |(x, y)| x - y);
         let buckets: std::collections::BTreeSet<usize> =
-            solved.iter().map(|d| d.saturating_sub(1) / 5).collect();
+            solved.iter().filter_map(|&d| objview_pool::split::bucket_of(d)).collect();
         let ds_spread = ds.iter().max().unwrap() - ds.iter().min().unwrap();
         let (rv_min, rv_max) = rv.iter().fold((f64::MAX, f64::MIN), |(lo, hi), &x| (lo.min(x), hi.max(x)));
         moved += usize::from(dp_spread > 0);

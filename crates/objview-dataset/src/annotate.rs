@@ -23,7 +23,9 @@ use objview_geom::cloud::{cloud_count, read_cloud, sample_surface};
 use objview_geom::normalize::{load_normalized, Normalization, Transform};
 use objview_render::{Camera, Intrinsics};
 use objview_views::ViewSet;
-use objview_voxel::{bitset_count, union_into, Visibility, VisibilityMode, VoxelSet, DEFAULT_MAX_RANGE};
+use objview_voxel::{
+    bitset_count, union_bitsets, union_into, Visibility, VisibilityMode, VoxelSet, DEFAULT_MAX_RANGE,
+};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
@@ -327,9 +329,7 @@ pub fn annotate_object(
     for (n, cams) in &views.sets {
         if *n == PLANNING_VIEWS {
             planning_bits = vis.observe_all_bitsets(cams);
-            let mut acc = vec![0u64; words];
-            planning_bits.iter().for_each(|b| union_into(&mut acc, b));
-            counts.push(bitset_count(&acc));
+            counts.push(bitset_count(&union_bitsets(&planning_bits, set.len())));
         } else {
             let acc = cams
                 .par_iter()

@@ -5,9 +5,14 @@
 //! 2. annotate every object's difficulty (SPEC §4: r_vis, d_sat, exact d_plan) into
 //!    `annotations.jsonl` (resumable: a re-run skips finished objects);
 //! 3. split the pool (SPEC §6) into `splits/`, print its statistics, and draw Figure 2 into
-//!    `figures/`.
-//!
-//! Later stages (episodes, baselines, reports) extend this command.
+//!    `figures/`;
+//! 4. run online episodes (SPEC §5) on Main-Hidden-Test: every classical planner (random-tsp at
+//!    K = 5 and K = 30, rse and rse-mov once each — their K = 5, K = 30 and MS@0.02 results are
+//!    checkpoints of one run, which stops once K = 5, K = 30 and every MS@δ exist: the demo's
+//!    checkpoint list is the paper's 5, 30) in `whole` and `quarter`, and the ground-truth oracle over
+//!    tammes-128 on Main-Hidden-Test and Slow-Saturation (the slow-saturation table), into
+//!    `episodes/*.jsonl` (resumable);
+//! 5. write the report (the paper's Tables 2–5, CSVs, figures) into `report/` and print it.
 
 use anyhow::{Context, Result};
 use clap::Parser;
@@ -40,6 +45,13 @@ pub struct Args {
     /// Stop after the geometry stage (no annotation, splits or figures).
     #[arg(long)]
     pub geometry_only: bool,
+    /// Stop after the difficulty stages (no episodes or report).
+    #[arg(long)]
+    pub no_episodes: bool,
+    /// Main-Hidden-Test quota as a fraction of the main pool. The paper's 528/5523 ≈ 0.0956
+    /// leaves only 2–3 of the 28 main built-in objects, so the demo holds out more.
+    #[arg(long, default_value_t = 0.15)]
+    pub test_fraction: f64,
 }
 
 struct Row {
@@ -67,7 +79,7 @@ pub fn run(a: Args) -> Result<()> {
     if !a.objects.is_empty() {
         paths.retain(|p| a.objects.iter().any(|n| p.file_stem().is_some_and(|s| s == n.as_str())));
     }
-    println!("[1/6] synthesized {} built-in objects into {}", paths.len(), objects_dir.display());
+    println!("[1/8] synthesized {} built-in objects into {}", paths.len(), objects_dir.display());
     let views = ViewSet::resolve(&a.views)?;
     let cameras: Vec<Camera> =
         views.poses(VIEW_RADIUS).into_iter().map(|p| Camera::new(p, Intrinsics::default())).collect();
@@ -82,7 +94,7 @@ pub fn run(a: Args) -> Result<()> {
         })
         .collect();
     bar.finish_and_clear();
-    println!("[2/6] rendered the start view and swept {} ({} views) per object", a.views, views.len());
+    println!("[2/8] rendered the start view and swept {} ({} views) per object", a.views, views.len());
 
     let mut ok = Vec::new();
     let mut failed = Vec::new();
@@ -135,7 +147,7 @@ pub fn run(a: Args) -> Result<()> {
     let summary_path = a.out.join("summary.json");
     crate::common::write_json(&summary_path, &summary)?;
     println!(
-        "\n[3/6] wrote {} ({} objects, {} failed); start-view depth + previews in {}; {:.1} s, {} seconds per object on average",
+        "\n[3/8] wrote {} ({} objects, {} failed); start-view depth + previews in {}; {:.1} s, {} seconds per object on average",
         summary_path.display(),
         ok.len(),
         failed.len(),
@@ -152,7 +164,7 @@ pub fn run(a: Args) -> Result<()> {
 /// Stages 4–6: annotate, split + stats, figures.
 fn difficulty_stages(a: &Args, objects: &[PathBuf], t0: Instant) -> Result<()> {
     let annotations = a.out.join("annotations.jsonl");
-    println!("\n[4/6] annotating the difficulty of every object (SPEC §4) into {}", annotations.display());
+    println!("\n[4/8] annotating the difficulty of every object (SPEC §4) into {}", annotations.display());
     crate::annotate::run(crate::annotate::Args {
         inputs: objects.to_vec(),
         out: annotations.clone(),
@@ -169,12 +181,12 @@ fn difficulty_stages(a: &Args, objects: &[PathBuf], t0: Instant) -> Result<()> {
         retry_failed: false,
     })?;
     let splits = a.out.join("splits");
-    println!("\n[5/6] splitting the pool (SPEC §6) into {}", splits.display());
+    println!("\n[5/8] splitting the pool (SPEC §6) into {}", splits.display());
     crate::pool_split::run_split(crate::pool_split::SplitArgs {
         annotations: vec![annotations.clone()],
         out_dir: splits.clone(),
         seed: 0,
-        test_fraction: objview_pool::split::DEFAULT_TEST_FRACTION,
+        test_fraction: a.test_fraction,
         train_size: None,
     })?;
     println!();
@@ -184,13 +196,100 @@ fn difficulty_stages(a: &Args, objects: &[PathBuf], t0: Instant) -> Result<()> {
         json: false,
     })?;
     let figures = a.out.join("figures");
-    println!("\n[6/6] drawing Figure 2 into {}", figures.display());
+    println!("\n[6/8] drawing Figure 2 into {}", figures.display());
     crate::pool_plot::run(crate::pool_plot::Args {
-        annotations: vec![annotations],
+        annotations: vec![annotations.clone()],
         out: figures,
         representatives: 6,
     })?;
+    if !a.no_episodes {
+        episode_stages(a, &annotations)?;
+    }
     println!("\ndemo finished in {:.1} s", t0.elapsed().as_secs_f64());
+    Ok(())
+}
+
+/// One `objview run` of the demo.
+fn demo_run(
+    out: &Path,
+    planner: &str,
+    space: &str,
+    budget: &str,
+    objects: &Path,
+    extra: impl FnOnce(&mut crate::run::Args),
+) -> Result<PathBuf> {
+    let mut args = crate::run::Args {
+        planner: planner.into(),
+        space: space.into(),
+        budget: budget.into(),
+        objects: vec![objects.to_path_buf()],
+        out: out.join(format!("{planner}_{space}_{budget}.jsonl")),
+        candidates: "tammes-360".into(),
+        seed: 0,
+        threads: None,
+        normalize: Normalization::Unit,
+        gt_cloud_dir: None,
+        cache_dir: Some(out.join("reference-cache")),
+        no_cache: false,
+        start_pose: None,
+        cap: 129,
+        checkpoints: vec![5, 30],
+        no_enough_info: false,
+        no_timings: false,
+        retry_failed: false,
+        quiet: true,
+    };
+    extra(&mut args);
+    let file = args.out.clone();
+    let t = Instant::now();
+    let s = crate::run::execute(&args)?;
+    println!(
+        "  {planner:<10} {space:<8} budget {budget:<5} {} episodes ({} failed, {} already done) {:>6.1} s -> {}",
+        s.done,
+        s.failed,
+        s.skipped,
+        t.elapsed().as_secs_f64(),
+        file.display()
+    );
+    Ok(file)
+}
+
+/// Stages 7–8: episodes of every classical planner and the oracle, then the report.
+fn episode_stages(a: &Args, annotations: &Path) -> Result<()> {
+    let splits = a.out.join("splits");
+    let test = splits.join("main_hidden_test.json");
+    let slow = splits.join("slow_saturation.json");
+    let episodes = a.out.join("episodes");
+    std::fs::create_dir_all(&episodes).with_context(|| format!("creating {}", episodes.display()))?;
+    let n_test = objview_dataset::read_split(&test)?.len();
+    let n_slow = if slow.exists() { objview_dataset::read_split(&slow)?.len() } else { 0 };
+    println!(
+        "\n[7/8] online episodes (SPEC §5) on Main-Hidden-Test ({n_test} objects) into {}",
+        episodes.display()
+    );
+    let mut files = Vec::new();
+    for space in ["whole", "quarter"] {
+        for (planner, budget) in
+            [("random-tsp", "5"), ("random-tsp", "30"), ("rse", "auto"), ("rse-mov", "auto")]
+        {
+            files.push(demo_run(&episodes, planner, space, budget, &test, |_| {})?);
+        }
+    }
+    // The slow-saturation diagnostic: the oracle over tammes-128 until it is exhausted.
+    for (name, split) in [("test", &test), ("slow", &slow)] {
+        if name == "slow" && n_slow == 0 {
+            continue;
+        }
+        let f = demo_run(&episodes, "oracle", "whole", "auto", split, |r| {
+            r.candidates = "tammes-128".into();
+            r.no_enough_info = true;
+            r.out = r.out.with_file_name(format!("oracle_whole_tammes128_{name}.jsonl"));
+        })?;
+        files.push(f);
+    }
+    let report_dir = a.out.join("report");
+    println!("\n[8/8] report (the paper's Tables 2–5) into {}", report_dir.display());
+    crate::report::write(&files, &[annotations.to_path_buf()], &report_dir, true)?;
     Ok(())
 }
 

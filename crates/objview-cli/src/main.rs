@@ -5,6 +5,7 @@
 mod annotate;
 mod bench;
 mod bench_annotate;
+mod bench_episode;
 mod common;
 mod demo;
 mod feasibility;
@@ -15,6 +16,8 @@ mod pool_plot;
 mod pool_split;
 mod provenance;
 mod render;
+mod report;
+mod run;
 mod viewset;
 mod visibility;
 
@@ -50,6 +53,11 @@ enum Command {
     /// Benchmarks of the hot paths (print medians).
     #[command(subcommand)]
     Bench(bench::Command),
+    /// Online episodes (SPEC §5): one per object with a planner, view space and budget; one JSON
+    /// line each; resumable.
+    Run(run::Args),
+    /// Tables 2–5 of the paper, full summaries and figures from episode results.
+    Report(report::Args),
     /// The main job on the built-in objects: synthesize, render, annotate visibility, summarize.
     Demo(demo::Args),
 }
@@ -79,6 +87,8 @@ fn main() {
         Command::Pool(c) => pool::run(c),
         Command::Objects(c) => objects::run(c),
         Command::Bench(c) => bench::run(c),
+        Command::Run(a) => run::run(a),
+        Command::Report(a) => report::run(a),
         Command::Demo(a) => demo::run(a),
     };
     if let Err(e) = result {
@@ -89,7 +99,7 @@ fn main() {
 
 /// The chain of causes joined by ": " on one line, innermost last; a cause whose text the
 /// message so far already ends with (errors that print their source) is not repeated.
-fn one_line(e: &anyhow::Error) -> String {
+pub(crate) fn one_line(e: &anyhow::Error) -> String {
     let mut msg = String::new();
     for cause in e.chain() {
         let c = cause.to_string();

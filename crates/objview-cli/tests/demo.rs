@@ -1,5 +1,6 @@
 //! End-to-end test of the main job (`objview demo`) on a few built-in objects: every stage
-//! writes its outputs, and a re-run resumes the annotation instead of redoing it.
+//! writes its outputs (episodes and report included), and a re-run resumes the annotation and
+//! the episodes instead of redoing them.
 
 mod common;
 
@@ -10,9 +11,11 @@ use serde_json::Value;
 fn demo_runs_every_stage_and_resumes() {
     let dir = tempdir();
     let out = dir.path().join("demo");
-    let args = ["demo", "--out", s(&out), "--objects", "cube,cone,mug,chair"];
+    let args = ["demo", "--out", s(&out), "--objects", "cube,cone,mug,chair", "--test-fraction", "0.5"];
     let stdout = objview_ok(&args);
-    for stage in ["[1/6]", "[2/6]", "[3/6]", "[4/6]", "[5/6]", "[6/6]", "demo finished"] {
+    for stage in
+        ["[1/8]", "[2/8]", "[3/8]", "[4/8]", "[5/8]", "[6/8]", "[7/8]", "[8/8]", "Table 2", "demo finished"]
+    {
         assert!(stdout.contains(stage), "missing {stage} in:\n{stdout}");
     }
     let summary: Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
@@ -37,8 +40,36 @@ fn demo_runs_every_stage_and_resumes() {
             assert!(out.join(format!("figures/{f}.{ext}")).is_file(), "{f}.{ext}");
         }
     }
-    // A second run keeps the annotations and skips them.
+    // Episodes: every classical planner in both spaces, and the oracle.
+    for f in [
+        "random-tsp_whole_5",
+        "random-tsp_whole_30",
+        "rse_whole_auto",
+        "rse-mov_whole_auto",
+        "random-tsp_quarter_5",
+        "rse_quarter_auto",
+        "oracle_whole_tammes128_test",
+    ] {
+        let text = std::fs::read_to_string(out.join(format!("episodes/{f}.jsonl"))).unwrap();
+        let eps: Vec<Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        assert!(!eps.is_empty(), "{f}");
+        assert!(
+            eps.iter().all(|e| e.get("error").is_none() && e["checkpoints"].get("terminal").is_some()),
+            "{f}"
+        );
+    }
+    let md = std::fs::read_to_string(out.join("report/report.md")).unwrap();
+    for t in ["Table 2", "Table 3", "Table 4", "Table 5", "rse-mov", "random-tsp"] {
+        assert!(md.contains(t), "report lacks {t}");
+    }
+    let episodes = std::fs::read_to_string(out.join("episodes/rse_whole_auto.jsonl")).unwrap();
+    // A second run keeps the annotations and the episodes and skips them.
     let stdout = objview_ok(&args);
     assert!(stdout.contains("0 done, 0 failed, 4 skipped"), "{stdout}");
     assert_eq!(std::fs::read_to_string(out.join("annotations.jsonl")).unwrap(), ann);
+    assert_eq!(std::fs::read_to_string(out.join("episodes/rse_whole_auto.jsonl")).unwrap(), episodes);
+    assert!(
+        stdout.contains("0 episodes (0 failed, 1 already done)") || stdout.contains("already done)"),
+        "{stdout}"
+    );
 }

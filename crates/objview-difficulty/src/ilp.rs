@@ -444,8 +444,9 @@ pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<C
     Ok(result)
 }
 
-/// Takes the process-wide HiGHS lock, adding the time spent waiting to `waited`.
-fn highs_lock(waited: &std::cell::Cell<f64>) -> std::sync::MutexGuard<'static, ()> {
+/// Takes the process-wide HiGHS lock, adding the time spent waiting to `waited`. Every HiGHS
+/// call in the workspace (cover ILP, TSP ILP) holds it: concurrent HiGHS instances are unsafe.
+pub fn highs_lock(waited: &std::cell::Cell<f64>) -> std::sync::MutexGuard<'static, ()> {
     let t = Instant::now();
     let guard = HIGHS_LOCK.lock().unwrap_or_else(PoisonError::into_inner);
     waited.set(waited.get() + t.elapsed().as_secs_f64());

@@ -1,0 +1,70 @@
+//! `objview report`: episode results (JSON Lines of `objview run`) → the paper's Tables 2–5 as
+//! Markdown and CSV, the full per-method summary, and figures (`objview_report`).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+use clap::Parser;
+use objview_report::{build_report, ReportSettings};
+
+#[derive(Parser)]
+pub struct Args {
+    /// Episode result files (JSON Lines).
+    #[arg(required = true)]
+    pub results: Vec<PathBuf>,
+    /// Output folder.
+    #[arg(long, default_value = "report")]
+    pub out: PathBuf,
+    /// Difficulty annotations (`objview annotate` output) for the slow-saturation table.
+    #[arg(long, num_args = 1..)]
+    pub annotations: Vec<PathBuf>,
+    /// τ of NSC/SC in the tables.
+    #[arg(long, default_value = "0.02")]
+    pub tau: String,
+    /// Rows per setting in the top-k tables.
+    #[arg(long, default_value_t = 3)]
+    pub top: usize,
+    /// NSC threshold of the path-efficient table.
+    #[arg(long, default_value_t = 0.95)]
+    pub quality_threshold: f64,
+    /// Skip the figures.
+    #[arg(long)]
+    pub no_plots: bool,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    let settings = ReportSettings {
+        tau: a.tau.clone(),
+        top: a.top,
+        quality_threshold: a.quality_threshold,
+        plots: !a.no_plots,
+        ..Default::default()
+    };
+    let files = report_with(&a.results, &a.annotations, &a.out, &settings, true)?;
+    println!("report: {} files in {}", files.len(), a.out.display());
+    Ok(())
+}
+
+/// Builds and writes the report with default settings; prints the tables when `print`.
+pub fn write(results: &[PathBuf], annotations: &[PathBuf], out: &Path, print: bool) -> Result<Vec<PathBuf>> {
+    report_with(results, annotations, out, &ReportSettings::default(), print)
+}
+
+fn report_with(
+    results: &[PathBuf],
+    annotations: &[PathBuf],
+    out: &Path,
+    settings: &ReportSettings,
+    print: bool,
+) -> Result<Vec<PathBuf>> {
+    let report = build_report(results, annotations, settings)?;
+    let files = report.write(out)?;
+    if print {
+        println!("{}", report.markdown());
+        println!("Tables (Markdown + CSV) and figures (PNG + SVG):");
+        for f in &files {
+            println!("  {}", f.display());
+        }
+    }
+    Ok(files)
+}

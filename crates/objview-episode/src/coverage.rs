@@ -1,0 +1,637 @@
+//! Nearest-fused-point distances of a fixed point set (the ground-truth cloud for SC@τ and CD,
+//! the observable reference for NSC@τ), kept exact and updated incrementally after each
+//! fusion step. This is where SC, NSC and the GT→fused half of CD come from.
+//!
+//! Each target point keeps d² to its nearest fused point and that point's slot. After an
+//! insertion only slots that were created or moved can change a distance:
+//! - *push*: every changed slot updates the targets in the 27 fine voxels around it; a target
+//!   whose nearest slot moved away is recomputed. This is exact for every target whose
+//!   distance was ≤ h (any point closer than h lies in those 27 voxels).
+//! - *far* targets (distance > h, or none yet): the minimum with the changed slots, found
+//!   block by block with box pruning; recomputed from scratch when their nearest slot moved.
+//!
+//! With a cap (NSC needs distances only up to max τ), distances at or above the cap are
+//! stored as +∞ and searches are bounded by it.
+
+use crate::fusion::FusedCloud;
+use crate::grid::{block_of, dist2, local_index, Domain, BLOCK, BLOCK_CELLS, NONE};
+
+/// A fixed point set with its nearest-fused distances.
+#[derive(Debug, Clone)]
+pub struct Targets {
+    domain: Domain,
+    /// Points sorted by (block, fine voxel).
+    pts: Vec<[f64; 3]>,
+    /// Domain block → index into `cell_start` (or NONE).
+    table: Vec<u32>,
+    /// Per target block: start offsets of its 512 voxels into `pts` (513 entries).
+    cell_start: Vec<[u32; BLOCK_CELLS + 1]>,
+    /// Per target block: its block key.
+    block_keys: Vec<[i32; 3]>,
+    /// Nearest-fused d² (∞: none, or ≥ cap).
+    pub d2: Vec<f64>,
+    /// Nearest slot, or NONE.
+    nn: Vec<u32>,
+    /// Targets with d² > h² at the start of the next update.
+    far: Vec<u32>,
+    cap2: f64,
+    mark: Vec<u32>,
+    epoch: u32,
+    /// Per target: bit j set once d² < τ_j² has held at some update (see [`Targets::coverage`]).
+    ever: Vec<u8>,
+}
+
+impl Targets {
+    /// Indexes `points` in `domain` (points outside the domain are an error naming how many).
+    /// `cap`: distances at or above it are only known to be "≥ cap" (∞ for exact distances).
+    pub fn new(domain: Domain, points: &[[f64; 3]], cap: f64) -> Result<Targets, String> {
+        let mut keyed: Vec<(u32, u32, usize)> = Vec::with_capacity(points.len());
+        let mut outside = 0usize;
+        for (i, &p) in points.iter().enumerate() {
+            let k = domain.key(p);
+            match domain.block_index(block_of(k)) {
+                Some(b) => keyed.push((b as u32, local_index(k) as u32, i)),
+                None => outside += 1,
+            }
+        }
+        if outside > 0 {
+            return Err(format!("{outside} target points lie outside the metric domain"));
+        }
+        keyed.sort_unstable();
+        let mut table = vec![NONE; domain.num_blocks()];
+        let mut cell_start: Vec<[u32; BLOCK_CELLS + 1]> = Vec::new();
+        let mut block_keys = Vec::new();
+        let mut pts = Vec::with_capacity(keyed.len());
+        let mut i = 0;
+        while i < keyed.len() {
+            let b = keyed[i].0;
+            let mut starts = [0u32; BLOCK_CELLS + 1];
+            let mut j = i;
+            for (c, start) in starts.iter_mut().enumerate().take(BLOCK_CELLS) {
+                *start = (i + (j - i)) as u32;
+                while j < keyed.len() && keyed[j].0 == b && keyed[j].1 as usize == c {
+                    pts.push(points[keyed[j].2]);
+                    j += 1;
+                }
+            }
+            starts[BLOCK_CELLS] = j as u32;
+            table[b as usize] = cell_start.len() as u32;
+            cell_start.push(starts);
+            block_keys.push(domain.block_key(b as usize));
+            i = j;
+        }
+        let n = pts.len();
+        Ok(Targets {
+            domain,
+            pts,
+            table,
+            cell_start,
+            block_keys,
+            d2: vec![f64::INFINITY; n],
+            nn: vec![NONE; n],
+            far: (0..n as u32).collect(),
+            cap2: cap * cap,
+            mark: vec![0; n],
+            epoch: 0,
+            ever: vec![0; n],
+        })
+    }
+
+    /// Forgets every distance (as before the first update).
+    pub fn reset(&mut self) {
+        self.d2.iter_mut().for_each(|d| *d = f64::INFINITY);
+        self.nn.iter_mut().for_each(|n| *n = NONE);
+        self.far = (0..self.pts.len() as u32).collect();
+        self.ever.iter_mut().for_each(|e| *e = 0);
+    }
+
+    /// Number of target points.
+    pub fn len(&self) -> usize {
+        self.pts.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.pts.is_empty()
+    }
+
+    /// The points (sorted by voxel; the order of [`Targets::d2`]).
+    pub fn points(&self) -> &[[f64; 3]] {
+        &self.pts
+    }
+
+    /// Number of targets with d² < τ² for each τ.
+    pub fn counts(&self, taus: &[f64]) -> Vec<usize> {
+        let mut counts = vec![0usize; taus.len()];
+        let t2: Vec<f64> = taus.iter().map(|t| t * t).collect();
+        for &d in &self.d2 {
+            for (c, &t) in counts.iter_mut().zip(&t2) {
+                if d < t {
+                    *c += 1;
+                }
+            }
+        }
+        counts
+    }
+
+    /// Coverage for each τ (at most 8): the fraction of targets that have been within τ of the
+    /// fused cloud at this or an earlier update — *sticky* coverage. A fused point is a voxel
+    /// centroid that drifts (inside its voxel) as views are added, so the instantaneous
+    /// fraction ([`Targets::fractions`]) can drop by a few points out of 10⁵–10⁶ even though
+    /// the accumulated observations still cover them; sticky coverage never decreases within
+    /// an episode. Call once per update, always with the same τ list.
+    pub fn coverage(&mut self, taus: &[f64]) -> Vec<f64> {
+        let t2: Vec<f64> = taus.iter().map(|t| t * t).collect();
+        let mut counts = vec![0usize; taus.len()];
+        for (e, &d) in self.ever.iter_mut().zip(&self.d2) {
+            for (j, &t) in t2.iter().enumerate().take(8) {
+                if d < t {
+                    *e |= 1 << j;
+                }
+                if *e & (1 << j) != 0 {
+                    counts[j] += 1;
+                }
+            }
+        }
+        let n = self.pts.len().max(1) as f64;
+        counts.into_iter().map(|c| c as f64 / n).collect()
+    }
+
+    /// Whether each target has ever been within τ_j (bit j of [`Targets::coverage`]'s list).
+    pub fn ever_covered(&self, j: usize) -> Vec<bool> {
+        self.ever.iter().map(|e| e & (1 << j) != 0).collect()
+    }
+
+    /// Instantaneous fraction of targets with d² < τ² for each τ.
+    pub fn fractions(&self, taus: &[f64]) -> Vec<f64> {
+        let mut counts = vec![0usize; taus.len()];
+        let t2: Vec<f64> = taus.iter().map(|t| t * t).collect();
+        for &d in &self.d2 {
+            for (c, &t) in counts.iter_mut().zip(&t2) {
+                if d < t {
+                    *c += 1;
+                }
+            }
+        }
+        let n = self.pts.len().max(1) as f64;
+        counts.into_iter().map(|c| c as f64 / n).collect()
+    }
+
+    /// Whether each target (in [`Targets::points`] order) has d² < τ².
+    pub fn covered(&self, tau: f64) -> Vec<bool> {
+        self.d2.iter().map(|&d| d < tau * tau).collect()
+    }
+
+    /// Mean d² (the GT→fused half of CD); ∞ while no fused point exists.
+    pub fn mean_d2(&self) -> f64 {
+        if self.pts.is_empty() {
+            return 0.0;
+        }
+        self.d2.iter().sum::<f64>() / self.pts.len() as f64
+    }
+
+    /// Updates every distance after `fused` changed the slots `changed` (its latest insertion).
+    ///
+    /// Returns, per changed slot, the squared distance to the nearest target (the fused→target
+    /// distance, which the push finds for free within h; a full search otherwise).
+    pub fn update(&mut self, fused: &FusedCloud, changed: &[u32]) -> Vec<f64> {
+        self.epoch += 1;
+        let h2 = self.domain.h * self.domain.h;
+        let mut recompute: Vec<u32> = Vec::new();
+        // Far targets whose nearest slot moved: full search (checked before the push, which
+        // may point them at slots that changed now).
+        for &i in &self.far {
+            let iu = i as usize;
+            if self.nn[iu] != NONE && fused.changed_now(self.nn[iu]) {
+                self.mark[iu] = self.epoch;
+                recompute.push(i);
+            }
+        }
+        let mut slot_min = vec![f64::INFINITY; changed.len()];
+        // Push: targets in the 27 voxels around each changed slot.
+        for (ci, &s) in changed.iter().enumerate() {
+            let q = fused.pos[s as usize];
+            let k = fused.key[s as usize];
+            let mut own = f64::INFINITY;
+            for dz in -1..=1 {
+                for dy in -1..=1 {
+                    for dx in -1..=1 {
+                        let kk = [k[0] + dx, k[1] + dy, k[2] + dz];
+                        let Some(b) = self.domain.block_index(block_of(kk)) else { continue };
+                        let t = self.table[b];
+                        if t == NONE {
+                            continue;
+                        }
+                        let starts = &self.cell_start[t as usize];
+                        let li = local_index(kk);
+                        for i in starts[li]..starts[li + 1] {
+                            let iu = i as usize;
+                            let d = dist2(self.pts[iu], q);
+                            own = own.min(d);
+                            if self.nn[iu] == s {
+                                if d <= self.d2[iu] {
+                                    self.d2[iu] = if d < self.cap2 { d } else { f64::INFINITY };
+                                } else if self.mark[iu] != self.epoch {
+                                    self.mark[iu] = self.epoch;
+                                    recompute.push(i);
+                                }
+                            } else if d < self.d2[iu] && d < self.cap2 {
+                                self.d2[iu] = d;
+                                self.nn[iu] = s;
+                            }
+                        }
+                    }
+                }
+            }
+            slot_min[ci] = own;
+        }
+        // Far targets: minimum with the changed slots, or a full search if their slot moved.
+        let far = std::mem::take(&mut self.far);
+        if !far.is_empty() && !changed.is_empty() {
+            let groups = ChangedBlocks::new(fused, changed);
+            let mut cand: Vec<(f64, usize)> = Vec::new();
+            let mut start = 0;
+            while start < far.len() {
+                // Far targets are sorted by block: handle one target block at a time.
+                let tb = self.block_of_point(far[start] as usize);
+                let mut end = start;
+                let mut max_d2: f64 = 0.0;
+                while end < far.len() && self.block_of_point(far[end] as usize) == tb {
+                    let iu = far[end] as usize;
+                    if self.mark[iu] != self.epoch {
+                        max_d2 = max_d2.max(self.d2[iu].min(self.cap2));
+                    }
+                    end += 1;
+                }
+                if max_d2 > 0.0 {
+                    cand.clear();
+                    groups.candidates(&self.domain, tb, max_d2, &mut cand);
+                    if cand.is_empty() {
+                        // No changed slot is close enough to improve any target of this block.
+                        start = end;
+                        continue;
+                    }
+                    cand.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                    for &i in &far[start..end] {
+                        let iu = i as usize;
+                        if self.mark[iu] == self.epoch {
+                            continue;
+                        }
+                        let p = self.pts[iu];
+                        let mut best = (self.d2[iu].min(self.cap2), self.nn[iu]);
+                        if best.0 <= 4.0 * h2 {
+                            // Close: the changed slots within √d² lie in the fine voxels
+                            // within ⌈√d²/h⌉ ≤ 2 of p's.
+                            let k = self.domain.key(p);
+                            let r = (best.0.sqrt() / self.domain.h).ceil() as i32;
+                            for dz in -r..=r {
+                                for dy in -r..=r {
+                                    for dx in -r..=r {
+                                        let s = fused.slot_at([k[0] + dx, k[1] + dy, k[2] + dz]);
+                                        if s != NONE && fused.changed_now(s) {
+                                            let d = dist2(p, fused.pos[s as usize]);
+                                            if d < best.0 {
+                                                best = (d, s);
+                                            }
+                                        }
+                                    }
+                                }
+                            }
+                            if best.0 < self.d2[iu] && best.0 < self.cap2 {
+                                self.d2[iu] = best.0;
+                                self.nn[iu] = best.1;
+                            }
+                            continue;
+                        }
+                        for &(lb, gi) in &cand {
+                            if lb >= best.0 {
+                                break;
+                            }
+                            let g = &groups.blocks[gi];
+                            if self.domain.block_dist2(p, g.key) >= best.0 {
+                                continue;
+                            }
+                            for &s in &groups.slots[g.range.0..g.range.1] {
+                                let d = dist2(p, fused.pos[s as usize]);
+                                if d < best.0 {
+                                    best = (d, s);
+                                }
+                            }
+                        }
+                        if best.0 < self.d2[iu] && best.0 < self.cap2 {
+                            self.d2[iu] = best.0;
+                            self.nn[iu] = best.1;
+                        }
+                    }
+                }
+                start = end;
+            }
+        }
+        for &i in &recompute {
+            let iu = i as usize;
+            let (d, s) = fused.nearest(self.pts[iu], self.cap2);
+            if s == NONE {
+                self.d2[iu] = f64::INFINITY;
+                self.nn[iu] = NONE;
+            } else {
+                self.d2[iu] = d;
+                self.nn[iu] = s;
+            }
+        }
+        // The next far list: previous far targets and recomputed ones still farther than h.
+        let mut next: Vec<u32> =
+            far.into_iter().chain(recompute).filter(|&i| self.d2[i as usize] > h2).collect();
+        next.sort_unstable();
+        next.dedup();
+        self.far = next;
+        // Fused→target: exact when the push found a target within h (anything else is ≥ h).
+        for (m, &s) in slot_min.iter_mut().zip(changed) {
+            if *m > h2 {
+                *m = self.nearest_d2(fused.pos[s as usize]);
+            }
+        }
+        slot_min
+    }
+
+    /// Target-block index of point `i` (points are sorted by block).
+    fn block_of_point(&self, i: usize) -> [i32; 3] {
+        block_of(self.domain.key(self.pts[i]))
+    }
+
+    /// Number of targets currently farther than h (or uncovered).
+    pub fn far_count(&self) -> usize {
+        self.far.len()
+    }
+
+    /// The keys of blocks holding targets (for tests and diagnostics).
+    pub fn num_blocks(&self) -> usize {
+        self.block_keys.len()
+    }
+}
+
+/// Squared distance between the boxes of two blocks (0 when they touch or overlap).
+fn block_box_dist2(d: &Domain, a: [i32; 3], b: [i32; 3]) -> f64 {
+    let e = d.h * BLOCK as f64;
+    let mut s = 0.0;
+    for ax in 0..3 {
+        let gap = ((a[ax] - b[ax]).abs() - 1).max(0) as f64 * e;
+        s += gap * gap;
+    }
+    s
+}
+
+/// The changed slots of one step grouped by block.
+struct ChangedBlocks {
+    blocks: Vec<ChangedBlock>,
+    slots: Vec<u32>,
+    /// Domain block index → index into `blocks`, or NONE.
+    lookup: Vec<u32>,
+}
+
+struct ChangedBlock {
+    key: [i32; 3],
+    range: (usize, usize),
+}
+
+impl ChangedBlocks {
+    fn new(fused: &FusedCloud, changed: &[u32]) -> ChangedBlocks {
+        let mut v: Vec<(u32, u32)> = changed.iter().map(|&s| (fused.block[s as usize], s)).collect();
+        v.sort_unstable();
+        let mut blocks = Vec::new();
+        let mut slots = Vec::with_capacity(v.len());
+        let mut i = 0;
+        while i < v.len() {
+            let b = v[i].0;
+            let start = slots.len();
+            while i < v.len() && v[i].0 == b {
+                slots.push(v[i].1);
+                i += 1;
+            }
+            blocks
+                .push(ChangedBlock { key: fused.domain.block_key(b as usize), range: (start, slots.len()) });
+        }
+        let mut lookup = vec![NONE; fused.domain.num_blocks()];
+        for (gi, g) in blocks.iter().enumerate() {
+            if let Some(b) = fused.domain.block_index(g.key) {
+                lookup[b] = gi as u32;
+            }
+        }
+        ChangedBlocks { blocks, slots, lookup }
+    }
+
+    /// Groups whose block box is closer than √max_d2 to target block `tb`, with that lower
+    /// bound: by dense lookup of the blocks around `tb` when that is cheaper than a scan.
+    fn candidates(&self, domain: &Domain, tb: [i32; 3], max_d2: f64, out: &mut Vec<(f64, usize)>) {
+        let e = domain.h * BLOCK as f64;
+        let reach = if max_d2.is_finite() { (max_d2.sqrt() / e).ceil() as i64 + 1 } else { i64::MAX };
+        let side = reach.saturating_mul(2).saturating_add(1);
+        let volume = side.saturating_mul(side).saturating_mul(side);
+        if volume < self.blocks.len() as i64 {
+            let r = reach as i32;
+            for dz in -r..=r {
+                for dy in -r..=r {
+                    for dx in -r..=r {
+                        let b = [tb[0] + dx, tb[1] + dy, tb[2] + dz];
+                        let Some(bi) = domain.block_index(b) else { continue };
+                        let gi = self.lookup[bi];
+                        if gi != NONE {
+                            let lb = block_box_dist2(domain, tb, b);
+                            if lb < max_d2 {
+                                out.push((lb, gi as usize));
+                            }
+                        }
+                    }
+                }
+            }
+        } else {
+            for (gi, g) in self.blocks.iter().enumerate() {
+                let lb = block_box_dist2(domain, tb, g.key);
+                if lb < max_d2 {
+                    out.push((lb, gi));
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    fn brute(targets: &Targets, fused: &FusedCloud, cap2: f64) -> Vec<f64> {
+        targets
+            .points()
+            .iter()
+            .map(|&p| {
+                let d = fused.pos.iter().map(|&q| dist2(p, q)).fold(f64::INFINITY, f64::min);
+                if d < cap2 {
+                    d
+                } else {
+                    f64::INFINITY
+                }
+            })
+            .collect()
+    }
+
+    /// Random "views": patches of a sphere of radius 0.5 sampled densely, with jitter, so
+    /// voxels are revisited and centroids move.
+    fn patch(rng: &mut rand_chacha::ChaCha8Rng, n: usize) -> Vec<[f64; 3]> {
+        let c: [f64; 3] = [rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)];
+        let cn = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+        (0..n)
+            .filter_map(|_| {
+                let d: [f64; 3] = [
+                    c[0] / cn + rng.gen_range(-0.5..0.5),
+                    c[1] / cn + rng.gen_range(-0.5..0.5),
+                    c[2] / cn + rng.gen_range(-0.5..0.5),
+                ];
+                let dn = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                (dn > 0.0).then(|| [0.5 * d[0] / dn, 0.5 * d[1] / dn, 0.5 * d[2] / dn])
+            })
+            .collect()
+    }
+
+    #[test]
+    fn incremental_distances_equal_brute_force() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.05);
+        // Targets: the sphere (radius 0.5) plus an inner sphere (never observed: stays far).
+        let mut tp: Vec<[f64; 3]> = patch(&mut rng, 4000);
+        tp.extend(patch(&mut rng, 4000));
+        tp.extend(patch(&mut rng, 500).iter().map(|p| [p[0] * 0.5, p[1] * 0.5, p[2] * 0.5]));
+        for cap in [f64::INFINITY, 0.03] {
+            let mut fused = FusedCloud::new(domain.clone());
+            let mut t = Targets::new(domain.clone(), &tp, cap).unwrap();
+            assert_eq!(t.len(), tp.len());
+            for step in 0..6 {
+                let obs = patch(&mut rng, 6000);
+                let delta = fused.insert(&obs);
+                let to_t = t.update(&fused, &delta.changed);
+                for (&s, &d) in delta.changed.iter().zip(&to_t) {
+                    let q = fused.pos[s as usize];
+                    let b = t.points().iter().map(|&p| dist2(p, q)).fold(f64::INFINITY, f64::min);
+                    assert_eq!(d, b, "fused→target distance of slot {s}");
+                }
+                let want = brute(&t, &fused, cap * cap);
+                for (i, (&a, &b)) in t.d2.iter().zip(&want).enumerate() {
+                    assert!(a == b, "cap {cap} step {step} target {i}: {a} vs brute {b}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn fractions_and_mean() {
+        let domain = Domain::covering(0.005, [-1.0; 3], [1.0; 3], 0.05);
+        let tp = vec![[0.0, 0.0, 0.0], [0.015, 0.0, 0.0], [0.5, 0.0, 0.0]];
+        let mut t = Targets::new(domain.clone(), &tp, f64::INFINITY).unwrap();
+        let mut fused = FusedCloud::new(domain);
+        let d = fused.insert(&[[0.001, 0.0, 0.0]]);
+        t.update(&fused, &d.changed);
+        // Distances 0.001, 0.014, 0.499 (points sorted by voxel: same order here).
+        let f = t.fractions(&[0.01, 0.02, 0.03]);
+        assert_eq!(f, vec![1.0 / 3.0, 2.0 / 3.0, 2.0 / 3.0]);
+        let mean = (0.001f64.powi(2) + 0.014f64.powi(2) + 0.499f64.powi(2)) / 3.0;
+        assert!((t.mean_d2() - mean).abs() < 1e-12);
+        assert!(
+            Targets::new(Domain::covering(0.005, [0.0; 3], [0.1; 3], 0.0), &[[3.0, 0.0, 0.0]], 1.0).is_err()
+        );
+    }
+}
+
+impl Targets {
+    /// Squared distance from `p` to the nearest target point (exact; ∞ when there are none).
+    pub fn nearest_d2(&self, p: [f64; 3]) -> f64 {
+        let mut best = f64::INFINITY;
+        if self.pts.is_empty() {
+            return best;
+        }
+        let h = self.domain.h;
+        let k = self.domain.key(p);
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let kk = [k[0] + dx, k[1] + dy, k[2] + dz];
+                    for q in self.cell_points(kk) {
+                        best = best.min(dist2(p, *q));
+                    }
+                }
+            }
+        }
+        if best <= h * h {
+            return best;
+        }
+        let e = h * BLOCK as f64;
+        let bk = block_of(k);
+        let max_ring = 4;
+        for r in 0..=max_ring {
+            if r > 0 && ((r - 1) as f64 * e).powi(2) >= best {
+                return best;
+            }
+            crate::fusion::for_each_ring_block(bk, r, |b| {
+                if let Some(bi) = self.domain.block_index(b) {
+                    let t = self.table[bi];
+                    if t != NONE && self.domain.block_dist2(p, b) < best {
+                        let s = &self.cell_start[t as usize];
+                        for q in &self.pts[s[0] as usize..s[BLOCK_CELLS] as usize] {
+                            best = best.min(dist2(p, *q));
+                        }
+                    }
+                }
+            });
+        }
+        if (max_ring as f64 * e).powi(2) >= best {
+            return best;
+        }
+        for (t, key) in self.block_keys.iter().enumerate() {
+            if self.domain.block_dist2(p, *key) < best {
+                let s = &self.cell_start[t];
+                for q in &self.pts[s[0] as usize..s[BLOCK_CELLS] as usize] {
+                    best = best.min(dist2(p, *q));
+                }
+            }
+        }
+        best
+    }
+
+    /// The target points in fine voxel `k`.
+    #[inline]
+    fn cell_points(&self, k: [i32; 3]) -> &[[f64; 3]] {
+        let Some(b) = self.domain.block_index(block_of(k)) else { return &[] };
+        let t = self.table[b];
+        if t == NONE {
+            return &[];
+        }
+        let s = &self.cell_start[t as usize];
+        let li = local_index(k);
+        &self.pts[s[li] as usize..s[li + 1] as usize]
+    }
+}
+
+#[cfg(test)]
+mod nearest_tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn nearest_target_equals_brute_force() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let domain = Domain::covering(0.005, [-1.0; 3], [1.0; 3], 0.05);
+        let pts: Vec<[f64; 3]> = (0..3000)
+            .map(|i| {
+                if i % 10 == 0 {
+                    [rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)]
+                } else {
+                    [rng.gen_range(-0.2..0.2), 0.3 + rng.gen_range(-0.01..0.01), rng.gen_range(-0.2..0.2)]
+                }
+            })
+            .collect();
+        let t = Targets::new(domain, &pts, f64::INFINITY).unwrap();
+        for _ in 0..500 {
+            let p = [rng.gen_range(-1.0..1.0), rng.gen_range(-0.1..0.7), rng.gen_range(-1.0..1.0)];
+            let want = pts.iter().map(|&q| dist2(p, q)).fold(f64::INFINITY, f64::min);
+            assert_eq!(t.nearest_d2(p), want);
+        }
+    }
+}

@@ -1,0 +1,554 @@
+//! The environment of SPEC §5: it holds the hidden object, executes one planner action at a
+//! time (validate → feasibility → render → fuse → score), keeps the checkpoints, and decides
+//! when the episode ends. [`Episode`] is step-driven (the server drives it one request at a
+//! time); [`run_episode`] drives a local [`Planner`] to the end.
+//!
+//! Frames: every pose is in the object frame (normalized object units, roll in radians).
+
+use std::collections::BTreeMap;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::Arc;
+use std::time::Instant;
+
+use objview_geom::{Mesh, Pose};
+use objview_render::{Camera, Frame, Intrinsics, Renderer};
+use objview_views::ViewSpace;
+
+use crate::coverage::Targets;
+use crate::fusion::FusedCloud;
+use crate::grid::Domain;
+use crate::path::pose_distance;
+use crate::planner::{
+    Action, Budget, Environment, EpisodeContext, ExecutionMode, Observation, OracleAccess, Planner,
+    StopReason,
+};
+use crate::reference::Reference;
+use crate::result::{tau_key, Checkpoint, EpisodeResult, Metrics, Step, TerminalSource};
+use crate::settings::EpisodeSettings;
+use crate::stabilization::Stabilization;
+use crate::EpisodeError;
+
+/// The hidden object of an episode, prepared once per (object, view space).
+#[derive(Debug, Clone)]
+pub struct Scene {
+    /// Opaque object id.
+    pub uid: String,
+    /// The normalized mesh.
+    pub mesh: Arc<Mesh>,
+    /// Ground-truth surface points (normalized frame).
+    pub gt: Arc<Vec<[f64; 3]>>,
+    /// Where the ground truth came from.
+    pub gt_source: String,
+    /// The view space (feasibility rules).
+    pub space: ViewSpace,
+    /// The view-space name recorded in results.
+    pub space_name: String,
+    /// The observable reference of (object, space).
+    pub reference: Arc<Reference>,
+    /// The metric grid domain (covers mesh, ground truth and reference).
+    pub domain: Domain,
+    pub intrinsics: Intrinsics,
+}
+
+/// The grid domain for a mesh and its ground truth: their bounding box plus 0.1.
+pub fn scene_domain(mesh: &Mesh, gt: &[[f64; 3]], h: f64) -> Domain {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in mesh.positions.iter().chain(gt) {
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+        }
+    }
+    if !lo[0].is_finite() {
+        lo = [-1.0; 3];
+        hi = [1.0; 3];
+    }
+    Domain::covering(h, lo, hi, 0.1)
+}
+
+/// Method facts recorded in results.
+#[derive(Debug, Clone)]
+pub struct MethodInfo {
+    pub name: String,
+    pub family: String,
+    pub mode: ExecutionMode,
+    pub params: serde_json::Value,
+}
+
+/// How an episode ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Terminal {
+    pub source: TerminalSource,
+    pub reason: String,
+    pub detail: String,
+}
+
+/// One running episode.
+pub struct Episode {
+    scene: Arc<Scene>,
+    settings: EpisodeSettings,
+    method: MethodInfo,
+    budget: Budget,
+    seed: u64,
+    start_pose: Pose,
+    fused: FusedCloud,
+    gt: Targets,
+    reference: Targets,
+    /// Per fused slot: d² to the nearest ground-truth point (fused→GT half of CD).
+    slot_gt_d2: Vec<f64>,
+    ms: Vec<Stabilization>,
+    history: Vec<Pose>,
+    steps: Vec<Step>,
+    checkpoints: BTreeMap<String, Checkpoint>,
+    ks: Vec<usize>,
+    runtime: f64,
+    path_cost: f64,
+    terminal: Option<Terminal>,
+    renderer: Renderer,
+    frame: Frame,
+    started: Instant,
+    setup_seconds: f64,
+}
+
+impl Episode {
+    /// Starts an episode: takes the start view at `start_pose` and scores it.
+    pub fn start(
+        scene: Arc<Scene>,
+        settings: EpisodeSettings,
+        method: MethodInfo,
+        budget: Budget,
+        seed: u64,
+        start_pose: Pose,
+    ) -> Result<Episode, EpisodeError> {
+        let started = Instant::now();
+        settings.validate().map_err(EpisodeError::Settings)?;
+        let max_tau = settings.taus.iter().cloned().fold(0.0, f64::max);
+        let gt = Targets::new(scene.domain.clone(), &scene.gt, f64::INFINITY).map_err(EpisodeError::Setup)?;
+        let reference = Targets::new(scene.domain.clone(), &scene.reference.points, max_tau)
+            .map_err(EpisodeError::Setup)?;
+        let h = settings.fusion_voxel;
+        let ms = settings
+            .ms_deltas
+            .iter()
+            .map(|&d| Stabilization::new(d, h, settings.ms_growth, settings.ms_stable_steps))
+            .collect();
+        let mut ks = settings.checkpoint_ks.clone();
+        if let (Budget::Fixed(k), ExecutionMode::Iterative) = (budget, method.mode) {
+            ks.push(k);
+        }
+        ks.sort_unstable();
+        ks.dedup();
+        let cam = Camera::new(start_pose, scene.intrinsics);
+        let mut ep = Episode {
+            fused: FusedCloud::new(scene.domain.clone()),
+            gt,
+            reference,
+            slot_gt_d2: Vec::new(),
+            ms,
+            history: Vec::new(),
+            steps: Vec::new(),
+            checkpoints: BTreeMap::new(),
+            ks,
+            runtime: 0.0,
+            path_cost: 0.0,
+            terminal: None,
+            renderer: Renderer::new(),
+            frame: Frame::empty(cam),
+            started,
+            setup_seconds: 0.0,
+            scene,
+            settings,
+            method,
+            budget,
+            seed,
+            start_pose,
+        };
+        ep.setup_seconds = started.elapsed().as_secs_f64();
+        ep.observe(start_pose, 0.0);
+        Ok(ep)
+    }
+
+    /// The latest observation (what the planner sees).
+    pub fn observation(&self) -> Observation {
+        let rgb = self
+            .settings
+            .render_rgb
+            .then(|| Arc::new(objview_render::rgb::render_rgb(&self.scene.mesh, &self.frame)));
+        Observation {
+            step: self.steps.len() - 1,
+            pose: *self.history.last().unwrap_or(&self.start_pose),
+            intrinsics: self.scene.intrinsics,
+            depth: Arc::new(self.frame.depth.clone()),
+            rgb,
+        }
+    }
+
+    /// Whether the episode has ended.
+    pub fn terminal(&self) -> Option<&Terminal> {
+        self.terminal.as_ref()
+    }
+
+    /// Poses executed so far, start first.
+    pub fn history(&self) -> &[Pose] {
+        &self.history
+    }
+
+    /// The scene.
+    pub fn scene(&self) -> &Arc<Scene> {
+        &self.scene
+    }
+
+    /// For each reference point, whether it is covered at the smallest τ (NSC's coverage;
+    /// oracle use only).
+    pub fn reference_covered(&self) -> Vec<bool> {
+        let j = (0..self.settings.taus.len())
+            .min_by(|&a, &b| self.settings.taus[a].total_cmp(&self.settings.taus[b]))
+            .unwrap_or(0);
+        self.reference.ever_covered(j)
+    }
+
+    /// The planner context of this episode.
+    pub fn context(&self, candidates: Arc<Vec<Pose>>, candidate_set: &str, oracle: bool) -> EpisodeContext {
+        EpisodeContext {
+            seed: crate::episode_seed(self.seed, &self.scene.uid, &self.scene.space_name, self.budget),
+            object_id: self.scene.uid.clone(),
+            view_space: self.scene.space_name.clone(),
+            budget: self.budget,
+            candidates,
+            candidate_set: candidate_set.to_string(),
+            start_pose: self.start_pose,
+            intrinsics: self.scene.intrinsics,
+            oracle: oracle.then(|| OracleAccess {
+                mesh: self.scene.mesh.clone(),
+                reference: Arc::new(self.reference.points().to_vec()),
+            }),
+        }
+    }
+
+    /// Ends the episode (if it has not ended) with `source`/`reason`.
+    pub fn end(&mut self, source: TerminalSource, reason: &str, detail: impl Into<String>) {
+        if self.terminal.is_none() {
+            self.terminal = Some(Terminal { source, reason: reason.to_string(), detail: detail.into() });
+        }
+    }
+
+    /// Adds planner time (seconds) to PR.
+    pub fn add_runtime(&mut self, seconds: f64) {
+        if self.settings.record_timings {
+            self.runtime += seconds;
+        }
+    }
+
+    /// Applies one action (after the planner spent `planner_seconds` choosing it). A stop, an
+    /// invalid action, the cap and `enough_info` end the episode; a finite plan with a fixed
+    /// budget K that asks for a move after its K-th view ends with `budget_reached` (the move is
+    /// not executed).
+    pub fn apply(&mut self, action: &Action, planner_seconds: f64) {
+        if self.terminal.is_some() {
+            return;
+        }
+        self.add_runtime(planner_seconds);
+        match action {
+            Action::Stop { reason } => match StopReason::parse(reason) {
+                Some(r) => self.end(TerminalSource::AlgorithmStop, r.as_str(), ""),
+                None => self.end(
+                    TerminalSource::Benchmark,
+                    "invalid_action",
+                    format!("unknown stop reason {reason:?} (valid: plan_end, candidate_exhausted, next_view_visited, next_view_infeasible)"),
+                ),
+            },
+            Action::Move { pose } => {
+                let Some(p) = Pose::from_array(*pose) else {
+                    self.end(TerminalSource::Benchmark, "invalid_action", format!("pose {pose:?} is not 7 finite numbers"));
+                    return;
+                };
+                if p.center == p.look_at {
+                    self.end(TerminalSource::Benchmark, "invalid_action", "pose centre equals its look-at point");
+                    return;
+                }
+                if let (ExecutionMode::BudgetedPlan | ExecutionMode::SetCoverPlan, Budget::Fixed(k)) =
+                    (self.method.mode, self.budget)
+                {
+                    // A finite plan that asks for a view beyond its budget: the move is refused.
+                    if self.history.len() > k {
+                        self.end(
+                            TerminalSource::Benchmark,
+                            "budget_reached",
+                            format!("the plan asked for view {} beyond its budget K = {k}", self.history.len()),
+                        );
+                        return;
+                    }
+                }
+                if !self.scene.space.is_feasible(&p) {
+                    let why = self.scene.space.explain(&p).unwrap_or_default();
+                    self.end(
+                        TerminalSource::Benchmark,
+                        "invalid_action",
+                        format!("pose {pose:?} is infeasible in view space {}: {why}", self.scene.space_name),
+                    );
+                    return;
+                }
+                self.observe(p, if self.settings.record_timings { planner_seconds } else { 0.0 });
+            }
+        }
+        self.check_limits();
+    }
+
+    /// Ends at the cap or (iterative planners) `enough_info`.
+    fn check_limits(&mut self) {
+        if self.terminal.is_some() {
+            return;
+        }
+        let views = self.history.len();
+        if views >= self.settings.cap {
+            self.end(
+                TerminalSource::Benchmark,
+                "max_cap_reached",
+                format!("{views} views (cap {})", self.settings.cap),
+            );
+            return;
+        }
+        match (self.method.mode, self.budget) {
+            (ExecutionMode::Iterative, _) => {
+                if self.settings.enough_info && self.all_checkpoints_reached() {
+                    self.end(TerminalSource::Benchmark, "enough_info", "every checkpoint reached");
+                }
+            }
+            (_, Budget::Fixed(_)) | (_, Budget::Auto) => {}
+        }
+    }
+
+    fn all_checkpoints_reached(&self) -> bool {
+        self.ks.iter().all(|k| self.checkpoints.contains_key(&format!("K={k}")))
+            && self
+                .settings
+                .ms_deltas
+                .iter()
+                .all(|d| self.checkpoints.contains_key(&format!("MS@{}", tau_key(*d))))
+    }
+
+    /// Renders, fuses and scores the view from `pose`.
+    fn observe(&mut self, pose: Pose, planner_seconds: f64) {
+        let t0 = Instant::now();
+        let cam = Camera::new(pose, self.scene.intrinsics);
+        self.renderer.render_into(&self.scene.mesh, &cam, &mut self.frame);
+        let points = self.frame.observed_points();
+        let delta = self.fused.insert(&points);
+        let to_gt = self.gt.update(&self.fused, &delta.changed);
+        self.reference.update(&self.fused, &delta.changed);
+        self.slot_gt_d2.resize(self.fused.len(), 0.0);
+        for (&s, d) in delta.changed.iter().zip(to_gt) {
+            self.slot_gt_d2[s as usize] = d;
+        }
+        let first_new = self.fused.len() - delta.new_slots;
+        for m in &mut self.ms {
+            m.add_fine_keys(self.fused.key[first_new..].iter().copied());
+        }
+        if let Some(prev) = self.history.last() {
+            self.path_cost += pose_distance(prev, &pose);
+        }
+        self.history.push(pose);
+        let step = self.history.len() - 1;
+        let taus = &self.settings.taus;
+        let sc = self.gt.coverage(taus);
+        let nsc = self.reference.coverage(taus);
+        let fused_mean = if self.fused.is_empty() {
+            0.0
+        } else {
+            self.slot_gt_d2.iter().sum::<f64>() / self.fused.len() as f64
+        };
+        let cd = if self.fused.is_empty() { f64::INFINITY } else { self.gt.mean_d2() + fused_mean };
+        let key = |v: Vec<f64>| taus.iter().zip(v).map(|(&t, x)| (tau_key(t), x)).collect::<BTreeMap<_, _>>();
+        let metrics = Metrics {
+            views: self.history.len(),
+            sc: key(sc),
+            nsc: key(nsc),
+            cd,
+            path_cost: self.path_cost,
+            runtime: self.runtime,
+        };
+        let mut ms_voxels = BTreeMap::new();
+        let mut triggered = Vec::new();
+        for m in &mut self.ms {
+            ms_voxels.insert(tau_key(m.delta), m.count());
+            if m.end_step(step) {
+                triggered.push(format!("MS@{}", tau_key(m.delta)));
+            }
+        }
+        let engine_seconds = if self.settings.record_timings { t0.elapsed().as_secs_f64() } else { 0.0 };
+        for name in triggered {
+            self.checkpoints.insert(name, Checkpoint { step, metrics: metrics.clone() });
+        }
+        let planner_views = step;
+        if self.ks.contains(&planner_views) {
+            self.checkpoints
+                .insert(format!("K={planner_views}"), Checkpoint { step, metrics: metrics.clone() });
+        }
+        self.steps.push(Step {
+            step,
+            pose: pose.to_array(),
+            metrics,
+            fused_points: self.fused.len(),
+            ms_voxels,
+            planner_seconds,
+            engine_seconds,
+        });
+    }
+
+    /// The result (call after the episode ended; an unfinished episode is recorded as
+    /// interrupted).
+    pub fn finish(mut self, settings_record: serde_json::Value) -> EpisodeResult {
+        if self.terminal.is_none() {
+            self.end(TerminalSource::Exception, "interrupted", "the episode was not finished");
+        }
+        let last = self.steps.last().expect("the start view is always taken");
+        self.checkpoints
+            .insert("terminal".into(), Checkpoint { step: last.step, metrics: last.metrics.clone() });
+        let t = self.terminal.clone().unwrap_or(Terminal {
+            source: TerminalSource::Exception,
+            reason: "interrupted".into(),
+            detail: String::new(),
+        });
+        EpisodeResult {
+            settings: settings_record,
+            uid: self.scene.uid.clone(),
+            method: self.method.name.clone(),
+            family: self.method.family.clone(),
+            execution_mode: mode_name(self.method.mode).into(),
+            view_space: self.scene.space_name.clone(),
+            budget: self.budget.label(),
+            seed: self.seed,
+            start_pose: self.start_pose.to_array(),
+            visited_poses: self.history.iter().map(|p| p.to_array()).collect(),
+            terminal_source: t.source,
+            terminal_reason: t.reason,
+            terminal_detail: t.detail,
+            steps: self.steps,
+            checkpoints: self.checkpoints,
+            reference: self.scene.reference.info.clone(),
+            gt_points: self.scene.gt.len(),
+            gt_source: self.scene.gt_source.clone(),
+            wall_seconds: if self.settings.record_timings {
+                self.started.elapsed().as_secs_f64()
+            } else {
+                0.0
+            },
+        }
+    }
+
+    /// Environment time of the set-up (seconds).
+    pub fn setup_seconds(&self) -> f64 {
+        self.setup_seconds
+    }
+
+    /// Per-step engine times so far (seconds).
+    pub fn engine_times(&self) -> Vec<f64> {
+        self.steps.iter().map(|s| s.engine_seconds).collect()
+    }
+}
+
+/// `iterative`, `budgeted_plan`, `set_cover_plan`.
+pub fn mode_name(m: ExecutionMode) -> &'static str {
+    match m {
+        ExecutionMode::Iterative => "iterative",
+        ExecutionMode::BudgetedPlan => "budgeted_plan",
+        ExecutionMode::SetCoverPlan => "set_cover_plan",
+    }
+}
+
+/// The environment as the planner sees it during one call.
+struct PlannerView<'a> {
+    space: &'a ViewSpace,
+    history: &'a [Pose],
+    covered: Option<Vec<bool>>,
+}
+
+impl Environment for PlannerView<'_> {
+    fn is_feasible(&self, pose: &Pose) -> bool {
+        self.space.is_feasible(pose)
+    }
+    fn history(&self) -> &[Pose] {
+        self.history
+    }
+    fn oracle_covered(&self) -> Option<&[bool]> {
+        self.covered.as_deref()
+    }
+}
+
+/// Runs `planner` on `scene` to the end of the episode and returns its result. Planner time
+/// (reset + every act) is PR; a planner error or panic ends the episode with the `exception`
+/// source, scoring the views taken.
+#[allow(clippy::too_many_arguments)]
+pub fn run_episode(
+    scene: Arc<Scene>,
+    planner: &mut dyn Planner,
+    settings: &EpisodeSettings,
+    budget: Budget,
+    seed: u64,
+    start_pose: Pose,
+    candidates: Arc<Vec<Pose>>,
+    settings_record: serde_json::Value,
+) -> Result<EpisodeResult, EpisodeError> {
+    let method = MethodInfo {
+        name: planner.name().to_string(),
+        family: serde_json::to_value(planner.family())
+            .ok()
+            .and_then(|v| v.as_str().map(str::to_string))
+            .unwrap_or_default(),
+        mode: planner.execution_mode(),
+        params: planner.params(),
+    };
+    if planner.execution_mode() == ExecutionMode::BudgetedPlan && budget == Budget::Auto {
+        return Err(EpisodeError::Settings(format!(
+            "{} is a budgeted plan: it needs a fixed budget K, not `auto`",
+            planner.name()
+        )));
+    }
+    let oracle = planner.needs_ground_truth();
+    let mut ep = Episode::start(scene.clone(), settings.clone(), method, budget, seed, start_pose)?;
+    let ctx = ep.context(candidates, &settings.candidates, oracle);
+    let covered = |ep: &Episode| oracle.then(|| ep.reference_covered());
+    let t = Instant::now();
+    let reset = {
+        let env = PlannerView { space: &scene.space, history: ep.history(), covered: covered(&ep) };
+        catch_unwind(AssertUnwindSafe(|| planner.reset(&ctx, &env)))
+    };
+    ep.add_runtime(t.elapsed().as_secs_f64());
+    match reset {
+        Ok(Ok(())) => {}
+        Ok(Err(e)) => ep.end(TerminalSource::Exception, "planner_error", format!("reset: {e}")),
+        Err(p) => {
+            ep.end(TerminalSource::Exception, "planner_error", format!("reset panicked: {}", panic_text(&p)))
+        }
+    }
+    ep.check_limits();
+    while ep.terminal().is_none() {
+        let obs = ep.observation();
+        let t = Instant::now();
+        let act = {
+            let env = PlannerView { space: &scene.space, history: ep.history(), covered: covered(&ep) };
+            catch_unwind(AssertUnwindSafe(|| planner.act(&obs, &env)))
+        };
+        let secs = t.elapsed().as_secs_f64();
+        match act {
+            Ok(Ok(a)) => ep.apply(&a, secs),
+            Ok(Err(e)) => {
+                ep.add_runtime(secs);
+                ep.end(TerminalSource::Exception, "planner_error", e.to_string());
+            }
+            Err(p) => {
+                ep.add_runtime(secs);
+                ep.end(TerminalSource::Exception, "planner_error", format!("panicked: {}", panic_text(&p)));
+            }
+        }
+    }
+    Ok(ep.finish(settings_record))
+}
+
+fn panic_text(p: &Box<dyn std::any::Any + Send>) -> String {
+    p.downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| p.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "panic".into())
+}

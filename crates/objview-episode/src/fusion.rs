@@ -1,0 +1,330 @@
+//! Incremental fusion of observed clouds (SPEC §5): after each view, fused = voxel centroids
+//! (voxel `h` = 0.005) of [previous fused points, new observed points] — the reference
+//! implementation's `voxel_down_sample(concat(fused, new))`, where a previous fused point counts
+//! as one point of its voxel. The grid is anchored at the origin (key floor(p / h), SPEC §4), so
+//! a voxel's point never leaves its voxel and its key never changes.
+//!
+//! Each fused point is a *slot*; slots are never removed, only added (a voxel seen for the first
+//! time) or moved (a voxel seen again). [`FusionDelta`] lists both: the coverage metrics update
+//! only around them.
+
+use crate::grid::{block_of, dist2, local_index, Domain, BLOCK_CELLS, NONE};
+
+/// One allocated block: the slot of each of its fine voxels and the list of its slots.
+#[derive(Debug, Clone)]
+pub struct FusedBlock {
+    pub key: [i32; 3],
+    pub cells: Box<[u32; BLOCK_CELLS]>,
+    pub slots: Vec<u32>,
+}
+
+/// The fused cloud: one point per occupied fine voxel.
+#[derive(Debug, Clone)]
+pub struct FusedCloud {
+    pub domain: Domain,
+    /// Block index of the domain → index into `blocks`, or [`NONE`].
+    pub table: Vec<u32>,
+    pub blocks: Vec<FusedBlock>,
+    /// Position of each slot (object frame).
+    pub pos: Vec<[f64; 3]>,
+    /// Fine key of each slot.
+    pub key: Vec<[i32; 3]>,
+    /// Domain block index of each slot.
+    pub block: Vec<u32>,
+    /// Step at which each slot last changed (see [`FusedCloud::changed_at`]).
+    pub stamp: Vec<u32>,
+    epoch: u32,
+    acc: Vec<[f64; 3]>,
+    cnt: Vec<u32>,
+}
+
+/// What one insertion changed.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FusionDelta {
+    /// Slots created or moved by this insertion, by block and voxel.
+    pub changed: Vec<u32>,
+    /// How many of them are new.
+    pub new_slots: usize,
+    /// Observed points outside the domain (dropped; never expected for points on the mesh).
+    pub dropped: usize,
+}
+
+impl FusedCloud {
+    /// An empty cloud over `domain`.
+    pub fn new(domain: Domain) -> FusedCloud {
+        let n = domain.num_blocks();
+        FusedCloud {
+            domain,
+            table: vec![NONE; n],
+            blocks: Vec::new(),
+            pos: Vec::new(),
+            key: Vec::new(),
+            block: Vec::new(),
+            stamp: Vec::new(),
+            epoch: 0,
+            acc: Vec::new(),
+            cnt: Vec::new(),
+        }
+    }
+
+    /// Number of fused points.
+    pub fn len(&self) -> usize {
+        self.pos.len()
+    }
+
+    /// Whether nothing has been fused.
+    pub fn is_empty(&self) -> bool {
+        self.pos.is_empty()
+    }
+
+    /// Insertions so far.
+    pub fn epoch(&self) -> u32 {
+        self.epoch
+    }
+
+    /// Whether `slot` changed in the latest insertion.
+    #[inline]
+    pub fn changed_now(&self, slot: u32) -> bool {
+        self.stamp[slot as usize] == self.epoch
+    }
+
+    /// The slot of fine key `k`, if occupied.
+    #[inline]
+    pub fn slot_at(&self, k: [i32; 3]) -> u32 {
+        match self.domain.block_index(block_of(k)) {
+            Some(b) => {
+                let t = self.table[b];
+                if t == NONE {
+                    NONE
+                } else {
+                    self.blocks[t as usize].cells[local_index(k)]
+                }
+            }
+            None => NONE,
+        }
+    }
+
+    /// The allocated block at domain block index `b`.
+    #[inline]
+    pub fn block_at(&self, b: usize) -> Option<&FusedBlock> {
+        let t = self.table[b];
+        (t != NONE).then(|| &self.blocks[t as usize])
+    }
+
+    /// Fuses `points` (object frame): per voxel, the new centroid of the previous point (if
+    /// any, weight 1) and the new points in that voxel, summed in input order.
+    pub fn insert(&mut self, points: &[[f64; 3]]) -> FusionDelta {
+        self.epoch += 1;
+        let mut delta = FusionDelta::default();
+        for &p in points {
+            let k = self.domain.key(p);
+            let Some(b) = self.domain.block_index(block_of(k)) else {
+                delta.dropped += 1;
+                continue;
+            };
+            if self.table[b] == NONE {
+                self.table[b] = self.blocks.len() as u32;
+                self.blocks.push(FusedBlock {
+                    key: self.domain.block_key(b),
+                    cells: Box::new([NONE; BLOCK_CELLS]),
+                    slots: Vec::new(),
+                });
+            }
+            let blk = &mut self.blocks[self.table[b] as usize];
+            let li = local_index(k);
+            let mut s = blk.cells[li];
+            if s == NONE {
+                s = self.pos.len() as u32;
+                blk.cells[li] = s;
+                blk.slots.push(s);
+                self.pos.push(p);
+                self.key.push(k);
+                self.block.push(b as u32);
+                self.stamp.push(0);
+                self.acc.push([0.0; 3]);
+                self.cnt.push(0);
+                delta.new_slots += 1;
+            }
+            let si = s as usize;
+            if self.stamp[si] != self.epoch {
+                self.stamp[si] = self.epoch;
+                delta.changed.push(s);
+                self.acc[si] = [0.0; 3];
+                self.cnt[si] = 0;
+            }
+            let a = &mut self.acc[si];
+            a[0] += p[0];
+            a[1] += p[1];
+            a[2] += p[2];
+            self.cnt[si] += 1;
+        }
+        // Spatial order (block, then voxel) for cache-friendly metric updates.
+        let (block, key) = (&self.block, &self.key);
+        delta.changed.sort_unstable_by_key(|&s| (block[s as usize], local_index(key[s as usize]) as u32, s));
+        let first_new = self.pos.len() - delta.new_slots;
+        for &s in &delta.changed {
+            let si = s as usize;
+            let (a, n) = (self.acc[si], self.cnt[si] as f64);
+            self.pos[si] = if si >= first_new {
+                [a[0] / n, a[1] / n, a[2] / n]
+            } else {
+                let q = self.pos[si];
+                [(q[0] + a[0]) / (n + 1.0), (q[1] + a[1]) / (n + 1.0), (q[2] + a[2]) / (n + 1.0)]
+            };
+        }
+        delta
+    }
+
+    /// The nearest fused point to `p` with squared distance below `bound2` (exact; ties →
+    /// smaller slot): `(d², slot)`, or `(bound2, NONE)` when there is none.
+    pub fn nearest(&self, p: [f64; 3], bound2: f64) -> (f64, u32) {
+        let mut best = (bound2, NONE);
+        if self.pos.is_empty() {
+            return best;
+        }
+        let h = self.domain.h;
+        let k = self.domain.key(p);
+        // Fast path: the 27 fine voxels around p. Anything outside them is ≥ h away.
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let s = self.slot_at([k[0] + dx, k[1] + dy, k[2] + dz]);
+                    if s != NONE {
+                        consider(&mut best, dist2(p, self.pos[s as usize]), s);
+                    }
+                }
+            }
+        }
+        if best.0 <= h * h {
+            return best;
+        }
+        // Rings of blocks around p's block; after ring r everything unseen is ≥ r·e away.
+        let e = h * crate::grid::BLOCK as f64;
+        let bk = block_of(k);
+        let max_ring = 4;
+        for r in 0..=max_ring {
+            if r > 0 && ((r - 1) as f64 * e).powi(2) >= best.0 {
+                return best;
+            }
+            for_each_ring_block(bk, r, |b| {
+                if let Some(bi) = self.domain.block_index(b) {
+                    if let Some(blk) = self.block_at(bi) {
+                        if self.domain.block_dist2(p, b) < best.0 {
+                            for &s in &blk.slots {
+                                consider(&mut best, dist2(p, self.pos[s as usize]), s);
+                            }
+                        }
+                    }
+                }
+            });
+        }
+        if (max_ring as f64 * e).powi(2) >= best.0 {
+            return best;
+        }
+        // Far: every block, pruned by its box.
+        for blk in &self.blocks {
+            if self.domain.block_dist2(p, blk.key) < best.0 {
+                for &s in &blk.slots {
+                    consider(&mut best, dist2(p, self.pos[s as usize]), s);
+                }
+            }
+        }
+        best
+    }
+}
+
+#[inline]
+fn consider(best: &mut (f64, u32), d: f64, s: u32) {
+    if d < best.0 || (d == best.0 && best.1 != NONE && s < best.1) {
+        *best = (d, s);
+    }
+}
+
+/// Calls `f` for every block key at Chebyshev distance exactly `r` from `c`.
+pub fn for_each_ring_block(c: [i32; 3], r: i32, mut f: impl FnMut([i32; 3])) {
+    if r == 0 {
+        f(c);
+        return;
+    }
+    for dz in -r..=r {
+        for dy in -r..=r {
+            let edge = dz.abs() == r || dy.abs() == r;
+            if edge {
+                for dx in -r..=r {
+                    f([c[0] + dx, c[1] + dy, c[2] + dz]);
+                }
+            } else {
+                f([c[0] - r, c[1] + dy, c[2] + dz]);
+                f([c[0] + r, c[1] + dy, c[2] + dz]);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    fn domain() -> Domain {
+        Domain::covering(0.005, [-1.0; 3], [1.0; 3], 0.05)
+    }
+
+    #[test]
+    fn centroids_follow_the_reference_rule() {
+        let mut f = FusedCloud::new(domain());
+        // Two points in voxel (0,0,0), one in (1,0,0).
+        let d = f.insert(&[[0.001, 0.001, 0.001], [0.003, 0.001, 0.001], [0.006, 0.001, 0.001]]);
+        assert_eq!(d.changed, vec![0, 1]); // voxel (0,0,0) then (1,0,0)
+        assert_eq!(d.new_slots, 2);
+        assert!((f.pos[0][0] - 0.002).abs() < 1e-15);
+        // Again: previous centroid counts once: (0.002 + 0.004) / 2 = 0.003.
+        let d = f.insert(&[[0.004, 0.001, 0.001]]);
+        assert_eq!((d.changed.clone(), d.new_slots), (vec![0], 0));
+        assert!((f.pos[0][0] - 0.003).abs() < 1e-15);
+        assert!(f.changed_now(0) && !f.changed_now(1));
+        // Out of domain points are counted, not fused.
+        assert_eq!(f.insert(&[[5.0, 0.0, 0.0]]).dropped, 1);
+        assert_eq!(f.len(), 2);
+    }
+
+    #[test]
+    fn ring_covers_every_block_once() {
+        for r in 0..4 {
+            let mut seen = std::collections::HashSet::new();
+            for_each_ring_block([0, 0, 0], r, |b| assert!(seen.insert(b)));
+            let n = (2 * r + 1).pow(3) - if r > 0 { (2 * r - 1).pow(3) } else { 0 };
+            assert_eq!(seen.len() as i32, n);
+            assert!(seen.iter().all(|b| b.iter().map(|x| x.abs()).max() == Some(r)));
+        }
+    }
+
+    #[test]
+    fn nearest_equals_brute_force() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut f = FusedCloud::new(domain());
+        // A clustered cloud (a patch) plus a few scattered points.
+        let mut pts = Vec::new();
+        for _ in 0..3000 {
+            pts.push([rng.gen_range(-0.1..0.1), rng.gen_range(-0.1..0.1), 0.5 + rng.gen_range(-0.01..0.01)]);
+        }
+        for _ in 0..20 {
+            pts.push([rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)]);
+        }
+        f.insert(&pts);
+        for i in 0..400 {
+            let p: [f64; 3] = if i % 2 == 0 {
+                [rng.gen_range(-0.12..0.12), rng.gen_range(-0.12..0.12), rng.gen_range(0.45..0.55)]
+            } else {
+                [rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)]
+            };
+            let brute = f.pos.iter().map(|&q| dist2(p, q)).fold(f64::INFINITY, f64::min);
+            let (d, s) = f.nearest(p, f64::INFINITY);
+            assert_eq!(d, brute);
+            assert_eq!(dist2(p, f.pos[s as usize]), d);
+            // Bounded: none within a bound below the true distance.
+            let (d2, s2) = f.nearest(p, brute * 0.999);
+            assert_eq!((d2, s2), (brute * 0.999, NONE));
+        }
+    }
+}

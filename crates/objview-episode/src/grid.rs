@@ -1,0 +1,134 @@
+//! The sparse voxel grid shared by fusion and the coverage metrics: fine voxels of size `h`
+//! (0.005, SPEC §5 fusion) with key floor(p / h), grouped into dense 8×8×8 blocks that are
+//! allocated on first use inside a fixed domain (the object's bounding box plus a margin).
+//! Lookups are two array reads, which keeps per-step fusion and nearest-neighbour updates cheap.
+
+/// Fine voxels per block edge, as a shift (8 = 1 << 3).
+pub const BLOCK_SHIFT: i32 = 3;
+/// Fine voxels per block edge.
+pub const BLOCK: i32 = 1 << BLOCK_SHIFT;
+/// Fine voxels per block.
+pub const BLOCK_CELLS: usize = (BLOCK * BLOCK * BLOCK) as usize;
+/// "No entry".
+pub const NONE: u32 = u32::MAX;
+
+/// The block domain: block keys `lo ..= lo + dims − 1` per axis.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Domain {
+    /// Fine voxel size (normalized object units).
+    pub h: f64,
+    /// Smallest block key per axis.
+    pub lo: [i32; 3],
+    /// Blocks per axis.
+    pub dims: [i32; 3],
+}
+
+impl Domain {
+    /// The domain covering the box `[min, max]` (object frame) plus `margin` on every side.
+    pub fn covering(h: f64, min: [f64; 3], max: [f64; 3], margin: f64) -> Domain {
+        let mut lo = [0; 3];
+        let mut dims = [0; 3];
+        for a in 0..3 {
+            let k0 = ((min[a] - margin) / h).floor() as i32 >> BLOCK_SHIFT;
+            let k1 = ((max[a] + margin) / h).floor() as i32 >> BLOCK_SHIFT;
+            lo[a] = k0;
+            dims[a] = k1 - k0 + 1;
+        }
+        Domain { h, lo, dims }
+    }
+
+    /// Number of blocks.
+    pub fn num_blocks(&self) -> usize {
+        (self.dims[0] * self.dims[1] * self.dims[2]) as usize
+    }
+
+    /// Fine voxel key of a point.
+    #[inline]
+    pub fn key(&self, p: [f64; 3]) -> [i32; 3] {
+        [(p[0] / self.h).floor() as i32, (p[1] / self.h).floor() as i32, (p[2] / self.h).floor() as i32]
+    }
+
+    /// Index of the block with block key `b`, if inside the domain.
+    #[inline]
+    pub fn block_index(&self, b: [i32; 3]) -> Option<usize> {
+        let x = b[0] - self.lo[0];
+        let y = b[1] - self.lo[1];
+        let z = b[2] - self.lo[2];
+        if x < 0 || y < 0 || z < 0 || x >= self.dims[0] || y >= self.dims[1] || z >= self.dims[2] {
+            return None;
+        }
+        Some((x + self.dims[0] * (y + self.dims[1] * z)) as usize)
+    }
+
+    /// Block key of block index `i`.
+    pub fn block_key(&self, i: usize) -> [i32; 3] {
+        let i = i as i32;
+        let x = i % self.dims[0];
+        let y = (i / self.dims[0]) % self.dims[1];
+        let z = i / (self.dims[0] * self.dims[1]);
+        [x + self.lo[0], y + self.lo[1], z + self.lo[2]]
+    }
+
+    /// Squared distance from `p` to the box of block key `b` (0 inside).
+    #[inline]
+    pub fn block_dist2(&self, p: [f64; 3], b: [i32; 3]) -> f64 {
+        let e = self.h * BLOCK as f64;
+        let mut d2 = 0.0;
+        for a in 0..3 {
+            let lo = b[a] as f64 * e;
+            let hi = lo + e;
+            let d = if p[a] < lo {
+                lo - p[a]
+            } else if p[a] > hi {
+                p[a] - hi
+            } else {
+                0.0
+            };
+            d2 += d * d;
+        }
+        d2
+    }
+}
+
+/// Block key of a fine key (floor division by 8).
+#[inline]
+pub fn block_of(k: [i32; 3]) -> [i32; 3] {
+    [k[0] >> BLOCK_SHIFT, k[1] >> BLOCK_SHIFT, k[2] >> BLOCK_SHIFT]
+}
+
+/// Index of fine key `k` inside its block (x fastest).
+#[inline]
+pub fn local_index(k: [i32; 3]) -> usize {
+    let m = BLOCK - 1;
+    ((k[0] & m) + BLOCK * ((k[1] & m) + BLOCK * (k[2] & m))) as usize
+}
+
+/// Squared Euclidean distance.
+#[inline]
+pub fn dist2(a: [f64; 3], b: [f64; 3]) -> f64 {
+    let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keys_and_blocks_floor() {
+        let d = Domain::covering(0.005, [-1.0; 3], [1.0; 3], 0.05);
+        assert_eq!(d.key([0.0, 0.0049, -0.0001]), [0, 0, -1]);
+        assert_eq!(block_of([-1, 7, 8]), [-1, 0, 1]);
+        assert_eq!(local_index([-1, 0, 0]), 7);
+        assert_eq!(local_index([8, 9, 0]), 8);
+        for i in [0, 17, d.num_blocks() - 1] {
+            assert_eq!(d.block_index(d.block_key(i)), Some(i));
+        }
+        assert_eq!(d.block_index([d.lo[0] - 1, d.lo[1], d.lo[2]]), None);
+        // The domain covers ±1.05: key of 1.05 lies in a block inside.
+        assert!(d.block_index(block_of(d.key([1.05, -1.05, 0.0]))).is_some());
+        // Box distance: block [0,0.04)³.
+        assert!((d.block_dist2([0.05, 0.02, 0.02], [0, 0, 0]) - 1e-4).abs() < 1e-15);
+        assert_eq!(d.block_dist2([0.01, 0.02, 0.03], [0, 0, 0]), 0.0);
+    }
+}

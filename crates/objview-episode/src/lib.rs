@@ -1,0 +1,46 @@
+//! Online episodes (SPEC §5, paper §5): a planner that never sees the object asks for camera
+//! poses one at a time; the environment checks feasibility, renders, fuses and scores.
+//!
+//! - [`planner`] — the planner interface (observations, actions, feasibility queries).
+//! - [`path`] — path cost under the shell distance.
+//! - [`fusion`] — incremental voxel-centroid fusion, on the sparse block grid of [`grid`].
+//! - [`coverage`] — exact nearest-fused distances → SC@τ, NSC@τ and CD.
+//! - [`reference`] — the observable reference (NSC's denominator), cached on disk.
+//! - [`stabilization`] — MS@δ.
+//! - [`scene`] — loading the hidden object (mesh, ground truth, reference).
+//! - [`engine`] — the environment, checkpoints, budgets and terminal reasons.
+//! - [`result`] — the JSON Lines result format; [`settings`] — every SPEC §5 constant.
+
+pub mod path;
+pub mod planner;
+
+pub use planner::{
+    episode_seed, Action, Budget, Environment, EpisodeContext, ExecutionMode, Family, Observation,
+    OracleAccess, Planner, PlannerError, StopReason,
+};
+pub mod coverage;
+pub mod engine;
+pub mod fusion;
+pub mod grid;
+pub mod reference;
+pub mod result;
+pub mod scene;
+pub mod settings;
+pub mod stabilization;
+
+pub use engine::{run_episode, scene_domain, Episode, MethodInfo, Scene, Terminal};
+pub use reference::{observable_reference, Reference};
+pub use result::{EpisodeResult, TerminalSource};
+pub use scene::{load_scene, scene_from_parts, SceneSource};
+pub use settings::EpisodeSettings;
+
+/// Errors of episode set-up (a running episode never fails: it ends with a terminal reason).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EpisodeError {
+    #[error("invalid episode settings: {0}")]
+    Settings(String),
+    #[error("episode set-up: {0}")]
+    Setup(String),
+    #[error("{0}: {1}")]
+    Io(String, String),
+}

@@ -1,0 +1,310 @@
+//! The planner interface of SPEC §5. A planner never sees the object: it receives observations
+//! (depth, optional RGB, the pose it was taken from, the intrinsics) and may ask the environment
+//! whether poses are feasible in the episode's view space; it answers with an [`Action`].
+//!
+//! Frames and units: every pose is a 7-number [`Pose`] in the object frame (normalized object
+//! units, roll in radians); depth is camera-frame z in the same units, 0 where nothing was hit.
+
+use std::fmt;
+use std::sync::Arc;
+
+use objview_geom::{Mesh, Pose};
+use objview_render::Intrinsics;
+use serde::{Deserialize, Serialize};
+
+/// The reasons a planner may give for stopping (SPEC §5). Anything else is an invalid action.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StopReason {
+    /// A finite plan has been executed to its end.
+    PlanEnd,
+    /// No candidate is left to choose from.
+    CandidateExhausted,
+    /// The planner's next view is one it already visited.
+    NextViewVisited,
+    /// The planner's next view is not feasible in the view space.
+    NextViewInfeasible,
+}
+
+impl StopReason {
+    /// All valid reasons.
+    pub const ALL: [StopReason; 4] = [
+        StopReason::PlanEnd,
+        StopReason::CandidateExhausted,
+        StopReason::NextViewVisited,
+        StopReason::NextViewInfeasible,
+    ];
+
+    /// The wire name (`plan_end`, …).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            StopReason::PlanEnd => "plan_end",
+            StopReason::CandidateExhausted => "candidate_exhausted",
+            StopReason::NextViewVisited => "next_view_visited",
+            StopReason::NextViewInfeasible => "next_view_infeasible",
+        }
+    }
+
+    /// Parses a wire name; `None` for an unknown reason.
+    pub fn parse(s: &str) -> Option<StopReason> {
+        StopReason::ALL.into_iter().find(|r| r.as_str() == s)
+    }
+}
+
+impl fmt::Display for StopReason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// What a planner answers. It is kept *raw* (seven numbers, a reason string) because remote
+/// planners send exactly that: the environment validates it (finite numbers, centre ≠ look-at,
+/// a known reason, a feasible pose) and ends the episode with `invalid_action` otherwise.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum Action {
+    /// Move the camera to `[cx, cy, cz, lx, ly, lz, roll]` (object frame, radians) and observe.
+    Move { pose: [f64; 7] },
+    /// End the episode with `reason` (one of [`StopReason`]'s wire names).
+    Stop { reason: String },
+}
+
+impl Action {
+    /// `Move` to a pose.
+    pub fn move_to(pose: &Pose) -> Action {
+        Action::Move { pose: pose.to_array() }
+    }
+
+    /// `Stop` with a valid reason.
+    pub fn stop(reason: StopReason) -> Action {
+        Action::Stop { reason: reason.as_str().to_string() }
+    }
+}
+
+/// Method family, as in the paper's Table 1 (plus the ground-truth oracle and sanity baselines).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Family {
+    Classical,
+    Learned,
+    Hybrid,
+    /// Reads the ground truth (only for diagnostics).
+    Oracle,
+    /// Sanity baselines (uniform random).
+    Baseline,
+}
+
+impl Family {
+    /// Display name used in tables (`Classical`, …).
+    pub fn title(self) -> &'static str {
+        match self {
+            Family::Classical => "Classical",
+            Family::Learned => "Learned",
+            Family::Hybrid => "Hybrid",
+            Family::Oracle => "Oracle",
+            Family::Baseline => "Baseline",
+        }
+    }
+}
+
+/// How a planner runs (paper §6.1): this decides how budgets apply (SPEC §5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ExecutionMode {
+    /// Chooses one view at a time. Runs once per episode; the budget checkpoints and MS@δ are
+    /// read off that run, which stops at `enough_info` or the cap.
+    Iterative,
+    /// Plans a fixed number K of views (needs a fixed budget).
+    BudgetedPlan,
+    /// Plans a finite view set and stops by itself (`plan_end`); the automatic setting.
+    SetCoverPlan,
+}
+
+/// The budget protocol of an episode (SPEC §5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Budget {
+    /// K planner-selected views after the start view.
+    Fixed(usize),
+    /// The planner's own stop (finite plans) or MS@0.02 (iterative planners).
+    Auto,
+}
+
+impl Budget {
+    /// `"5"`, `"30"`, `"auto"`.
+    pub fn label(self) -> String {
+        match self {
+            Budget::Fixed(k) => k.to_string(),
+            Budget::Auto => "auto".into(),
+        }
+    }
+
+    /// Parses `auto` or a positive integer.
+    pub fn parse(s: &str) -> Result<Budget, String> {
+        if s == "auto" {
+            return Ok(Budget::Auto);
+        }
+        match s.parse::<usize>() {
+            Ok(k) if k >= 1 => Ok(Budget::Fixed(k)),
+            _ => Err(format!("budget must be `auto` or a positive integer, got {s:?}")),
+        }
+    }
+}
+
+/// One observation handed to the planner.
+#[derive(Debug, Clone)]
+pub struct Observation {
+    /// 0 for the start view, then 1, 2, … (the number of planner moves so far).
+    pub step: usize,
+    /// The pose it was taken from.
+    pub pose: Pose,
+    /// The camera intrinsics (SPEC §2).
+    pub intrinsics: Intrinsics,
+    /// Camera-frame z per pixel, row-major (`v · width + u`), 0.0 where nothing was hit.
+    pub depth: Arc<Vec<f32>>,
+    /// RGB per pixel (same layout), when the episode renders colour.
+    pub rgb: Option<Arc<Vec<[u8; 3]>>>,
+}
+
+/// Ground-truth access for oracle planners only (see [`Planner::needs_ground_truth`]).
+#[derive(Debug, Clone)]
+pub struct OracleAccess {
+    /// The hidden (normalized) mesh.
+    pub mesh: Arc<Mesh>,
+    /// The observable reference cloud of (object, view space) (SPEC §5).
+    pub reference: Arc<Vec<[f64; 3]>>,
+}
+
+/// What a planner learns when an episode starts.
+#[derive(Debug, Clone)]
+pub struct EpisodeContext {
+    /// The episode's seed, already mixed with the object, view space and budget
+    /// (see [`episode_seed`]): a planner's random choices use it and nothing else.
+    pub seed: u64,
+    /// The object's opaque id (for logs; planners must not use it to look anything up).
+    pub object_id: String,
+    /// View-space name (`whole`, `quarter`, a file stem).
+    pub view_space: String,
+    /// The budget protocol.
+    pub budget: Budget,
+    /// The candidate poses the planner should choose from (e.g. tammes-360 at radius 3).
+    pub candidates: Arc<Vec<Pose>>,
+    /// Name of the candidate set (`tammes-360`, a file path).
+    pub candidate_set: String,
+    /// The start pose (the first observation is taken there).
+    pub start_pose: Pose,
+    /// Camera intrinsics.
+    pub intrinsics: Intrinsics,
+    /// Ground truth, present only when the planner asked for it.
+    pub oracle: Option<OracleAccess>,
+}
+
+/// The environment as a planner sees it: feasibility queries and its own history.
+pub trait Environment {
+    /// Whether `pose` is feasible in the episode's view space.
+    fn is_feasible(&self, pose: &Pose) -> bool;
+    /// [`Environment::is_feasible`] for each pose, in order.
+    fn feasible_mask(&self, poses: &[Pose]) -> Vec<bool> {
+        poses.iter().map(|p| self.is_feasible(p)).collect()
+    }
+    /// Poses executed so far, start pose first.
+    fn history(&self) -> &[Pose];
+    /// For oracle planners (who may read the object): for each reference point, whether the
+    /// current fused cloud covers it at τ = 0.01. `None` for everyone else.
+    fn oracle_covered(&self) -> Option<&[bool]> {
+        None
+    }
+}
+
+/// A planner's own failure (ends the episode with the `exception` terminal source).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct PlannerError(pub String);
+
+/// A view planner. One instance plays one episode at a time: [`Planner::reset`] starts an
+/// episode, then [`Planner::act`] is called once per observation (the start view first) until
+/// it stops or the environment ends the episode. The time spent inside `reset` and `act` is
+/// the episode's planning runtime (PR), measured by the environment.
+pub trait Planner: Send {
+    /// Method name as it appears in results (`rse`, `random-tsp`, …).
+    fn name(&self) -> &str;
+    /// Its family.
+    fn family(&self) -> Family;
+    /// Its execution mode.
+    fn execution_mode(&self) -> ExecutionMode;
+    /// Its parameters, recorded in every result line.
+    fn params(&self) -> serde_json::Value;
+    /// Whether it reads ground truth (only the oracle): then [`EpisodeContext::oracle`] is set.
+    fn needs_ground_truth(&self) -> bool {
+        false
+    }
+    /// Starts an episode.
+    fn reset(&mut self, ctx: &EpisodeContext, env: &dyn Environment) -> Result<(), PlannerError>;
+    /// The next action after observation `obs`.
+    fn act(&mut self, obs: &Observation, env: &dyn Environment) -> Result<Action, PlannerError>;
+}
+
+/// The per-episode seed of SPEC §5: a 64-bit mix (FNV-1a, then SplitMix64) of the user seed,
+/// the object id, the view-space name and the budget label, so that every (object, space,
+/// budget) gets its own reproducible stream.
+pub fn episode_seed(seed: u64, object_id: &str, view_space: &str, budget: Budget) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |bytes: &[u8]| {
+        for &b in bytes {
+            h ^= b as u64;
+            h = h.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+        h ^= 0xff;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    };
+    eat(&seed.to_le_bytes());
+    eat(object_id.as_bytes());
+    eat(view_space.as_bytes());
+    eat(budget.label().as_bytes());
+    splitmix64(h)
+}
+
+/// SplitMix64 finalizer.
+pub fn splitmix64(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stop_reasons_round_trip() {
+        for r in StopReason::ALL {
+            assert_eq!(StopReason::parse(r.as_str()), Some(r));
+        }
+        assert_eq!(StopReason::parse("done"), None);
+        let a = Action::stop(StopReason::PlanEnd);
+        assert_eq!(serde_json::to_string(&a).unwrap(), r#"{"type":"stop","reason":"plan_end"}"#);
+    }
+
+    #[test]
+    fn budgets_parse() {
+        assert_eq!(Budget::parse("auto"), Ok(Budget::Auto));
+        assert_eq!(Budget::parse("30"), Ok(Budget::Fixed(30)));
+        assert!(Budget::parse("0").is_err());
+        assert!(Budget::parse("-3").is_err());
+        assert!(Budget::parse("five").is_err());
+    }
+
+    #[test]
+    fn episode_seeds_differ_by_every_input() {
+        let s = episode_seed(0, "mug", "whole", Budget::Fixed(5));
+        assert_eq!(s, episode_seed(0, "mug", "whole", Budget::Fixed(5)));
+        assert_ne!(s, episode_seed(1, "mug", "whole", Budget::Fixed(5)));
+        assert_ne!(s, episode_seed(0, "cup", "whole", Budget::Fixed(5)));
+        assert_ne!(s, episode_seed(0, "mug", "quarter", Budget::Fixed(5)));
+        assert_ne!(s, episode_seed(0, "mug", "whole", Budget::Fixed(30)));
+        assert_ne!(s, episode_seed(0, "mug", "whole", Budget::Auto));
+        // Concatenation ambiguity: ("ab","c") vs ("a","bc").
+        assert_ne!(episode_seed(0, "ab", "c", Budget::Auto), episode_seed(0, "a", "bc", Budget::Auto));
+    }
+}

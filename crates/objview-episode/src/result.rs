@@ -1,0 +1,127 @@
+//! The result of one episode: one JSON line per episode (SPEC §5). Field names are a contract
+//! shared with `objview report`, the server and the Python client.
+//!
+//! Per-τ maps are keyed by τ written as a string with two decimals (`"0.01"`, `"0.02"`,
+//! `"0.03"`); `BTreeMap` keeps keys sorted so the same episode always serializes to the same
+//! bytes.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+/// Metrics after one view (also the payload of a checkpoint).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Metrics {
+    /// Views taken so far, start view included (#Views).
+    pub views: usize,
+    /// SC@τ: fraction of ground-truth points with a fused point closer than τ.
+    pub sc: BTreeMap<String, f64>,
+    /// NSC@τ: fraction of observable-reference points with a fused point closer than τ.
+    pub nsc: BTreeMap<String, f64>,
+    /// Chamfer distance: mean squared NN distance GT→fused plus fused→GT (units²).
+    pub cd: f64,
+    /// Shell path length from the start pose (normalized object units).
+    pub path_cost: f64,
+    /// Planning runtime so far (PR), seconds spent inside the planner.
+    pub runtime: f64,
+}
+
+/// One executed view and its metrics.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Step {
+    /// 0 = start view.
+    pub step: usize,
+    /// The executed pose `[cx, cy, cz, lx, ly, lz, roll]`.
+    pub pose: [f64; 7],
+    #[serde(flatten)]
+    pub metrics: Metrics,
+    /// Fused points (voxel 0.005 centroids).
+    pub fused_points: usize,
+    /// Voxel counts of the fused cloud at each MS resolution δ (keys as τ).
+    pub ms_voxels: BTreeMap<String, usize>,
+    /// Planner time for the action that led to this view (seconds; 0 for the start view).
+    pub planner_seconds: f64,
+    /// Environment time for this view: render + fusion + metrics (seconds).
+    pub engine_seconds: f64,
+}
+
+/// A named checkpoint (`K=5`, `MS@0.02`, `terminal`, …): the metrics at the view where it was
+/// reached, and that view's step index.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Checkpoint {
+    pub step: usize,
+    #[serde(flatten)]
+    pub metrics: Metrics,
+}
+
+/// Where the end of an episode came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TerminalSource {
+    /// The planner stopped (`terminal_reason` is its stop reason).
+    AlgorithmStop,
+    /// The benchmark ended it: `invalid_action`, `max_cap_reached` or `enough_info`.
+    Benchmark,
+    /// The planner failed (`planner_error`) or a remote planner timed out (`timeout`).
+    Exception,
+}
+
+/// The observable reference of (object, view space) used for NSC.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ReferenceInfo {
+    /// Reference points (voxel 0.005 centroids of all feasible reference views).
+    pub points: usize,
+    /// Feasible reference views fused.
+    pub views: usize,
+    /// Reference view set (`tammes-360`).
+    pub view_set: String,
+    /// Observable surface ratio: SC@τ of the reference itself.
+    pub observable_sc: BTreeMap<String, f64>,
+    /// Cache key (hash of mesh, view space, settings and version).
+    pub key: String,
+    /// Whether it was read from the cache (not written to results: a cached and a fresh
+    /// reference are identical, and so must the result lines be).
+    #[serde(skip)]
+    pub cached: bool,
+}
+
+/// One episode.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeResult {
+    /// Every setting and version that produced this line.
+    pub settings: serde_json::Value,
+    pub uid: String,
+    pub method: String,
+    /// `classical`, `learned`, `hybrid`, `oracle`, `baseline`.
+    pub family: String,
+    /// `iterative`, `budgeted_plan`, `set_cover_plan`.
+    pub execution_mode: String,
+    pub view_space: String,
+    /// `"5"`, `"30"`, `"auto"`.
+    pub budget: String,
+    /// The user seed (the planner got [`crate::episode_seed`] of it).
+    pub seed: u64,
+    pub start_pose: [f64; 7],
+    /// Every executed pose, start included, in order.
+    pub visited_poses: Vec<[f64; 7]>,
+    pub terminal_source: TerminalSource,
+    /// `plan_end`, `candidate_exhausted`, `next_view_visited`, `next_view_infeasible`,
+    /// `invalid_action`, `max_cap_reached`, `enough_info`, `planner_error`, `timeout`.
+    pub terminal_reason: String,
+    /// Human-readable detail (why an action was invalid, the planner's error message).
+    pub terminal_detail: String,
+    pub steps: Vec<Step>,
+    /// Named checkpoints, as reached; always `terminal`.
+    pub checkpoints: BTreeMap<String, Checkpoint>,
+    pub reference: ReferenceInfo,
+    /// Ground-truth points (|GT|) and where they came from.
+    pub gt_points: usize,
+    pub gt_source: String,
+    /// Wall time of the episode (seconds), set-up included.
+    pub wall_seconds: f64,
+}
+
+/// A τ written as a key: two decimals (`0.02` → `"0.02"`).
+pub fn tau_key(tau: f64) -> String {
+    format!("{tau:.2}")
+}

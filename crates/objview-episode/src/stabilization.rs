@@ -1,0 +1,131 @@
+//! Map stabilization MS@δ (SPEC §5, paper §5.2): n = number of voxels of size δ occupied by the
+//! fused cloud; growth = (n − n_prev) / max(n_prev, 1); a step is stable when growth < 0.01,
+//! and MS@δ triggers at the third stable step in a row. It is a checkpoint, never a stop.
+//!
+//! A fused point never leaves its fine voxel (see [`crate::fusion`]), so its δ-voxel is fixed at
+//! creation: the δ-voxel of the fine voxel's centre, which for δ a multiple of the fine size
+//! (0.01, 0.02, 0.03 of 0.005) is exactly the δ-voxel of every point inside it.
+
+use rustc_hash::FxHashSet;
+
+/// The stabilization rule for one δ.
+#[derive(Debug, Clone)]
+pub struct Stabilization {
+    /// Voxel size δ (normalized object units).
+    pub delta: f64,
+    /// Growth below which a step is stable (0.01).
+    pub growth_threshold: f64,
+    /// Stable steps in a row that trigger (3).
+    pub stable_steps: usize,
+    ratio: Option<i32>,
+    h: f64,
+    voxels: FxHashSet<[i32; 3]>,
+    prev: Option<usize>,
+    run: usize,
+    triggered_at: Option<usize>,
+}
+
+impl Stabilization {
+    /// A tracker for δ over fine voxels of size `h`.
+    pub fn new(delta: f64, h: f64, growth_threshold: f64, stable_steps: usize) -> Stabilization {
+        let r = delta / h;
+        let ratio = ((r - r.round()).abs() < 1e-9 && r.round() >= 1.0).then_some(r.round() as i32);
+        Stabilization {
+            delta,
+            growth_threshold,
+            stable_steps,
+            ratio,
+            h,
+            voxels: FxHashSet::default(),
+            prev: None,
+            run: 0,
+            triggered_at: None,
+        }
+    }
+
+    /// Adds the fine voxels of newly created fused points.
+    pub fn add_fine_keys(&mut self, keys: impl IntoIterator<Item = [i32; 3]>) {
+        for k in keys {
+            let d = match self.ratio {
+                Some(m) => [k[0].div_euclid(m), k[1].div_euclid(m), k[2].div_euclid(m)],
+                None => {
+                    let c = |x: i32| (((x as f64 + 0.5) * self.h) / self.delta).floor() as i32;
+                    [c(k[0]), c(k[1]), c(k[2])]
+                }
+            };
+            self.voxels.insert(d);
+        }
+    }
+
+    /// Current δ-voxel count n.
+    pub fn count(&self) -> usize {
+        self.voxels.len()
+    }
+
+    /// Ends a step (after its voxels were added); returns true when MS@δ triggers now.
+    pub fn end_step(&mut self, step: usize) -> bool {
+        self.observe(self.voxels.len(), step)
+    }
+
+    /// The rule on a raw count sequence (one call per view).
+    pub fn observe(&mut self, n: usize, step: usize) -> bool {
+        let stable = match self.prev {
+            None => false,
+            Some(p) => ((n as f64 - p as f64) / (p.max(1) as f64)) < self.growth_threshold,
+        };
+        self.prev = Some(n);
+        self.run = if stable { self.run + 1 } else { 0 };
+        if self.triggered_at.is_none() && self.run >= self.stable_steps {
+            self.triggered_at = Some(step);
+            return true;
+        }
+        false
+    }
+
+    /// The step at which it triggered.
+    pub fn triggered_at(&self) -> Option<usize> {
+        self.triggered_at
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(counts: &[usize]) -> Option<usize> {
+        let mut s = Stabilization::new(0.02, 0.005, 0.01, 3);
+        for (i, &n) in counts.iter().enumerate() {
+            s.observe(n, i);
+        }
+        s.triggered_at()
+    }
+
+    #[test]
+    fn triggers_at_the_third_stable_step_in_a_row() {
+        // Steps 0..: growth undefined at 0 (not stable), then 1.0, 0.005, 0.0, 0.0099 → third
+        // stable step is step 4.
+        assert_eq!(run(&[100, 200, 201, 201, 202]), Some(4));
+        // A break resets the run: 0.005, 0.0, 0.02 (unstable), then three stable.
+        assert_eq!(run(&[100, 200, 201, 201, 206, 206, 206, 206]), Some(7));
+        // growth exactly 0.01 is not stable (strict <).
+        assert_eq!(run(&[100, 100, 101, 102]), None);
+        // Only two stable steps.
+        assert_eq!(run(&[10, 10, 10]), Some(2).filter(|_| false).or(None));
+        assert_eq!(run(&[10, 10, 10, 10]), Some(3));
+        // From an empty map: max(n_prev, 1): 0 → 0 is stable (growth 0).
+        assert_eq!(run(&[0, 0, 0, 0]), Some(3));
+        // Triggers once: later steps do not move it.
+        assert_eq!(run(&[5, 5, 5, 5, 5, 5, 9, 9, 9, 9]), Some(3));
+    }
+
+    #[test]
+    fn delta_voxels_nest_exactly() {
+        let mut s = Stabilization::new(0.02, 0.005, 0.01, 3);
+        // Fine keys 0..3 share δ-voxel 0; 4 is the next; −1 is the previous.
+        s.add_fine_keys([[0, 0, 0], [3, 3, 3], [4, 0, 0], [-1, 0, 0], [-4, 0, 0], [-5, 0, 0]]);
+        assert_eq!(s.count(), 4);
+        let mut t = Stabilization::new(0.012, 0.005, 0.01, 3); // not a multiple: centre rule
+        t.add_fine_keys([[0, 0, 0], [1, 0, 0], [2, 0, 0]]); // centres 0.0025, 0.0075, 0.0125
+        assert_eq!(t.count(), 2);
+    }
+}

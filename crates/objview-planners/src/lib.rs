@@ -1,0 +1,16 @@
+//! The classical view planners (SPEC §5, paper Table 1), each a [`objview_episode::Planner`]:
+//!
+//! - [`random`]: a uniformly random feasible candidate per step (sanity baseline).
+//! - [`oracle`]: greedy on the ground truth (diagnostics only).
+//! - [`random_tsp`]: K random feasible candidates visited along the exact shortest open path
+//!   ([`tsp`]).
+//! - [`rse`]: rear-side entropy (Delmerico et al. 2018) and its movement-aware variant
+//!   RSE-Mov, on a probabilistic occupancy grid ([`occupancy`]).
+
+pub mod occupancy;
+pub mod oracle;
+pub mod random;
+pub mod random_tsp;
+pub mod registry;
+pub mod rse;
+pub mod tsp;

@@ -1,0 +1,132 @@
+//! `oracle`: greedy on the ground truth, for the slow-saturation diagnostic (paper §6.4) — the
+//! only planner allowed to read the object. At every step it takes the feasible, not yet
+//! visited candidate whose view would add the most observable-reference points at the
+//! smallest τ (NSC@0.01 gain), ties → lowest candidate index; it keeps going while gains are 0
+//! and stops with `candidate_exhausted` when every candidate was taken.
+//!
+//! Each candidate's coverage is precomputed on `reset` from that candidate's own fused view
+//! (voxel 0.005) and kept as a bitset over the reference points; the gain is measured against
+//! the environment's exact coverage of the running episode.
+
+use std::time::Instant;
+
+use objview_episode::coverage::Targets;
+use objview_episode::fusion::FusedCloud;
+use objview_episode::{
+    scene_domain, Action, Environment, EpisodeContext, ExecutionMode, Family, Observation, Planner,
+    PlannerError, StopReason,
+};
+use objview_geom::Pose;
+use objview_render::{Camera, Frame, Renderer};
+
+use crate::random::same_pose;
+
+/// The oracle planner.
+#[derive(Debug, Clone)]
+pub struct Oracle {
+    /// Coverage threshold of the gain (0.01).
+    pub tau: f64,
+    /// Fusion voxel for the per-candidate clouds (0.005).
+    pub voxel: f64,
+    candidates: Vec<Pose>,
+    feasible: Vec<bool>,
+    covers: Vec<Vec<u64>>,
+    taken: Vec<bool>,
+    /// Seconds spent precomputing candidate coverage in the last reset.
+    pub precompute_seconds: f64,
+}
+
+impl Default for Oracle {
+    fn default() -> Self {
+        Oracle {
+            tau: 0.01,
+            voxel: 0.005,
+            candidates: Vec::new(),
+            feasible: Vec::new(),
+            covers: Vec::new(),
+            taken: Vec::new(),
+            precompute_seconds: 0.0,
+        }
+    }
+}
+
+impl Planner for Oracle {
+    fn name(&self) -> &str {
+        "oracle"
+    }
+    fn family(&self) -> Family {
+        Family::Oracle
+    }
+    fn execution_mode(&self) -> ExecutionMode {
+        ExecutionMode::Iterative
+    }
+    fn params(&self) -> serde_json::Value {
+        serde_json::json!({"gain": "observable-reference points newly within tau", "tau": self.tau, "voxel": self.voxel})
+    }
+    fn needs_ground_truth(&self) -> bool {
+        true
+    }
+    fn reset(&mut self, ctx: &EpisodeContext, env: &dyn Environment) -> Result<(), PlannerError> {
+        let t = Instant::now();
+        let oracle =
+            ctx.oracle.as_ref().ok_or_else(|| PlannerError("the oracle needs ground-truth access".into()))?;
+        self.candidates = ctx.candidates.to_vec();
+        self.feasible = env.feasible_mask(&self.candidates);
+        self.taken = vec![false; self.candidates.len()];
+        let domain = scene_domain(&oracle.mesh, &oracle.reference, self.voxel);
+        let mut targets = Targets::new(domain.clone(), &oracle.reference, self.tau)
+            .map_err(|e| PlannerError(format!("oracle: {e}")))?;
+        let words = targets.len().div_ceil(64);
+        let mut renderer = Renderer::new();
+        self.covers = Vec::with_capacity(self.candidates.len());
+        for (i, pose) in self.candidates.iter().enumerate() {
+            let mut bits = vec![0u64; words];
+            if self.feasible[i] {
+                let cam = Camera::new(*pose, ctx.intrinsics);
+                let mut frame = Frame::empty(cam);
+                renderer.render_into(&oracle.mesh, &cam, &mut frame);
+                let mut fused = FusedCloud::new(domain.clone());
+                let delta = fused.insert(&frame.observed_points());
+                targets.reset();
+                targets.update(&fused, &delta.changed);
+                for (j, &d) in targets.d2.iter().enumerate() {
+                    if d < self.tau * self.tau {
+                        bits[j / 64] |= 1 << (j % 64);
+                    }
+                }
+            }
+            self.covers.push(bits);
+        }
+        self.precompute_seconds = t.elapsed().as_secs_f64();
+        Ok(())
+    }
+    fn act(&mut self, _obs: &Observation, env: &dyn Environment) -> Result<Action, PlannerError> {
+        let covered =
+            env.oracle_covered().ok_or_else(|| PlannerError("the oracle needs the coverage state".into()))?;
+        let mut now = vec![0u64; covered.len().div_ceil(64)];
+        for (j, &c) in covered.iter().enumerate() {
+            if c {
+                now[j / 64] |= 1 << (j % 64);
+            }
+        }
+        let history = env.history();
+        let mut best: Option<(u64, usize)> = None;
+        for i in 0..self.candidates.len() {
+            if !self.feasible[i] || self.taken[i] || history.iter().any(|h| same_pose(h, &self.candidates[i]))
+            {
+                continue;
+            }
+            let gain: u64 = self.covers[i].iter().zip(&now).map(|(a, b)| (a & !b).count_ones() as u64).sum();
+            if best.is_none_or(|(g, _)| gain > g) {
+                best = Some((gain, i));
+            }
+        }
+        match best {
+            Some((_, i)) => {
+                self.taken[i] = true;
+                Ok(Action::move_to(&self.candidates[i]))
+            }
+            None => Ok(Action::stop(StopReason::CandidateExhausted)),
+        }
+    }
+}

@@ -1,0 +1,45 @@
+//! Error type of `objview report`. Every variant names what it is about (the input file and
+//! line, the output file, the setting) and why, so that a failed report is diagnosable from one
+//! line of output.
+
+use std::path::PathBuf;
+
+use objview_dataset::DatasetError;
+use objview_plot::PlotError;
+use thiserror::Error;
+
+/// Errors of reading results, building tables and writing the report.
+#[derive(Debug, Error)]
+pub enum ReportError {
+    /// Reading an input or writing an output file failed.
+    #[error("{path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    /// A line of a results file is not an episode result or a failure line, or contradicts an
+    /// earlier line (a method with two families, …). `line` counts from 1.
+    #[error("{path}:{line}: {reason}")]
+    BadLine { path: PathBuf, line: usize, reason: String },
+    /// The annotation files could not be read (the inner error names the file and line).
+    #[error("annotations: {0}")]
+    Annotations(#[from] DatasetError),
+    /// A figure could not be drawn or written.
+    #[error("figure: {0}")]
+    Plot(#[from] PlotError),
+    /// A report setting is out of range.
+    #[error("invalid setting {name}: {reason}")]
+    InvalidSetting { name: &'static str, reason: String },
+    /// No results file was given.
+    #[error("no episode result files given")]
+    NoInputs,
+}
+
+impl ReportError {
+    /// Shorthand for [`ReportError::Io`].
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        ReportError::Io { path: path.into(), source }
+    }
+
+    /// Shorthand for [`ReportError::BadLine`].
+    pub fn bad_line(path: impl Into<PathBuf>, line: usize, reason: impl Into<String>) -> Self {
+        ReportError::BadLine { path: path.into(), line, reason: reason.into() }
+    }
+}

@@ -1,0 +1,387 @@
+//! Reading episode result files (JSON Lines of [`EpisodeResult`], SPEC §5) for the report.
+//!
+//! Files are read in the order given, lines in file order. A line is one of:
+//! - an episode result: checked here for what the tables rely on (a known execution mode, a
+//!   valid budget, a `terminal` checkpoint, NSC/SC at the report's τ in every checkpoint and
+//!   step), so that later stages never meet a missing value;
+//! - a failure line (a JSON object with an `error` field, written for an episode that could
+//!   not run): kept, counted and listed, never fatal;
+//! - blank: skipped.
+//!
+//! Anything else is an error naming the file and line, except a torn last line (no trailing
+//! newline and not JSON: an interrupted run), which is skipped with a warning.
+//!
+//! Duplicates: the same (uid, method, view space, budget, seed) seen twice keeps the last one.
+//! An iterative planner runs once and serves every budget setting (SPEC §5), so iterative runs of
+//! the same (uid, method, view space, seed) under several budget labels are also collapsed, to the
+//! run with the most views (the later one on a tie); both cases are listed as warnings.
+//!
+//! The kept episodes are sorted by (uid, method, view space, seed, budget, source), so that means
+//! do not depend on how shards were concatenated.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::PathBuf;
+
+use objview_episode::result::EpisodeResult;
+use objview_episode::{Budget, ExecutionMode};
+use serde::Serialize;
+use serde_json::Value;
+
+use crate::ReportError;
+
+/// One input file and what it held.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct InputFile {
+    /// The path as given.
+    pub path: PathBuf,
+    /// Complete non-blank lines.
+    pub lines: usize,
+    /// Of those, episode results (before removing duplicates).
+    pub episodes: usize,
+    /// Of those, failure lines.
+    pub failures: usize,
+    /// Whether a torn last line (an interrupted write) was skipped.
+    pub torn_last_line: bool,
+}
+
+/// Where a line came from: index into the input files, and line number (from 1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+pub struct Source {
+    /// Index into the input files.
+    pub file: usize,
+    /// Line number, from 1.
+    pub line: usize,
+}
+
+/// A checked episode result.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Episode {
+    /// Where it was read.
+    pub source: Source,
+    /// `execution_mode`, parsed.
+    pub mode: ExecutionMode,
+    /// `budget`, parsed.
+    pub budget: Budget,
+    /// The episode as read.
+    pub result: EpisodeResult,
+}
+
+/// A failure line: an episode that could not run. Fields other than `error` are taken from the
+/// line, or from its `settings` object (`objview run` writes `{uid, mesh, error, settings}` with
+/// the planner, view space, budget and seed in `settings`); empty when absent.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FailureLine {
+    /// Where it was read.
+    pub source: Source,
+    pub uid: String,
+    pub method: String,
+    pub view_space: String,
+    pub budget: String,
+    /// The seed, when the line has one.
+    pub seed: Option<u64>,
+    /// Why the episode could not run.
+    pub error: String,
+    /// An episode result with the same (uid, method, view space, budget, seed) exists (a retry
+    /// succeeded).
+    pub superseded: bool,
+}
+
+/// Why an episode was dropped in favour of another.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DuplicateKind {
+    /// Same (uid, method, view space, budget, seed): the last one is kept.
+    SameKey,
+    /// An iterative run of the same (uid, method, view space, seed) under another budget label:
+    /// the run with the most views is kept.
+    IterativeBudgets,
+}
+
+/// A dropped episode.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Duplicate {
+    /// Which rule dropped it.
+    pub kind: DuplicateKind,
+    pub uid: String,
+    pub method: String,
+    pub view_space: String,
+    pub budget: String,
+    pub seed: u64,
+    /// The episode kept instead.
+    pub kept: Source,
+    /// The episode dropped.
+    pub dropped: Source,
+}
+
+/// Everything read from the results files.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Loaded {
+    /// The input files, in the order given.
+    pub files: Vec<InputFile>,
+    /// Kept episodes, sorted (see the module docs).
+    pub episodes: Vec<Episode>,
+    /// Failure lines, in input order.
+    pub failures: Vec<FailureLine>,
+    /// Dropped duplicates, in input order of the dropped line.
+    pub duplicates: Vec<Duplicate>,
+    /// τ keys present in the NSC and SC of every checkpoint and step of every kept episode.
+    pub taus: Vec<String>,
+}
+
+impl Loaded {
+    /// `path:line` of a source.
+    pub fn locate(&self, s: Source) -> String {
+        locate(&self.files, s)
+    }
+}
+
+fn locate(files: &[InputFile], s: Source) -> String {
+    format!("{}:{}", files[s.file].path.display(), s.line)
+}
+
+/// Reads `paths` (see the module docs); `tau` is the τ key every checkpoint must have.
+pub fn load_results(paths: &[PathBuf], tau: &str) -> Result<Loaded, ReportError> {
+    if paths.is_empty() {
+        return Err(ReportError::NoInputs);
+    }
+    let mut files = Vec::new();
+    let mut raw = Vec::new();
+    let mut failures = Vec::new();
+    for (file, path) in paths.iter().enumerate() {
+        let text = std::fs::read_to_string(path).map_err(|e| ReportError::io(path, e))?;
+        let mut info =
+            InputFile { path: path.clone(), lines: 0, episodes: 0, failures: 0, torn_last_line: false };
+        let complete = text.ends_with('\n');
+        let all: Vec<&str> = text.lines().collect();
+        for (i, line) in all.iter().enumerate() {
+            if line.trim().is_empty() {
+                continue;
+            }
+            let source = Source { file, line: i + 1 };
+            let value: Value = match serde_json::from_str(line) {
+                Ok(v) => v,
+                Err(_) if !complete && i + 1 == all.len() => {
+                    info.torn_last_line = true;
+                    continue;
+                }
+                Err(e) => return Err(ReportError::bad_line(path, i + 1, format!("not JSON ({e})"))),
+            };
+            info.lines += 1;
+            if !value.is_object() {
+                return Err(ReportError::bad_line(path, i + 1, "not a JSON object"));
+            }
+            if value.get("error").is_some() {
+                info.failures += 1;
+                failures.push(failure_line(source, &value));
+                continue;
+            }
+            if value.get("d_sat").is_some() && value.get("method").is_none() {
+                return Err(ReportError::bad_line(
+                    path,
+                    i + 1,
+                    "an `objview annotate` line, not an episode result (give annotation files as annotations)",
+                ));
+            }
+            let result: EpisodeResult = serde_json::from_value(value)
+                .map_err(|e| ReportError::bad_line(path, i + 1, format!("not an episode result ({e})")))?;
+            let episode = check(result, source, tau).map_err(|r| ReportError::bad_line(path, i + 1, r))?;
+            info.episodes += 1;
+            raw.push(episode);
+        }
+        files.push(info);
+    }
+    check_methods(&files, &raw)?;
+    let (mut episodes, duplicates) = deduplicate(raw);
+    episodes.sort_by(|a, b| sort_key(a).cmp(&sort_key(b)));
+    let results: BTreeSet<(&str, &str, &str, &str, u64)> = episodes
+        .iter()
+        .map(|e| {
+            let r = &e.result;
+            (r.uid.as_str(), r.method.as_str(), r.view_space.as_str(), r.budget.as_str(), r.seed)
+        })
+        .collect();
+    for f in &mut failures {
+        f.superseded = f.seed.is_some_and(|seed| {
+            results.contains(&(
+                f.uid.as_str(),
+                f.method.as_str(),
+                f.view_space.as_str(),
+                f.budget.as_str(),
+                seed,
+            ))
+        });
+    }
+    let taus = common_taus(&episodes);
+    Ok(Loaded { files, episodes, failures, duplicates, taus })
+}
+
+fn sort_key(e: &Episode) -> (&str, &str, &str, u64, &str, Source) {
+    let r = &e.result;
+    (&r.uid, &r.method, &r.view_space, r.seed, &r.budget, e.source)
+}
+
+/// A failure line's fields: top-level keys, else the same keys in its `settings` object (where
+/// `objview run` records them; the method is its `planner` there).
+fn failure_line(source: Source, v: &Value) -> FailureLine {
+    let find = |keys: &[&str]| -> Option<&Value> {
+        let settings = v.get("settings");
+        keys.iter()
+            .find_map(|k| v.get(*k).filter(|x| !x.is_null()))
+            .or_else(|| keys.iter().find_map(|k| settings.and_then(|s| s.get(*k)).filter(|x| !x.is_null())))
+    };
+    let text = |keys: &[&str]| match find(keys) {
+        None => String::new(),
+        Some(Value::String(s)) => s.clone(),
+        Some(other) => other.to_string(),
+    };
+    FailureLine {
+        source,
+        uid: text(&["uid"]),
+        method: text(&["method", "planner"]),
+        view_space: text(&["view_space"]),
+        budget: text(&["budget"]),
+        seed: find(&["seed"]).and_then(Value::as_u64),
+        error: v.get("error").map_or_else(String::new, |e| match e {
+            Value::String(s) => s.clone(),
+            other => other.to_string(),
+        }),
+        superseded: false,
+    }
+}
+
+/// The checks of the module docs; the reason on failure.
+fn check(result: EpisodeResult, source: Source, tau: &str) -> Result<Episode, String> {
+    let mode: ExecutionMode =
+        serde_json::from_value(Value::String(result.execution_mode.clone())).map_err(|_| {
+            format!(
+                "unknown execution_mode '{}' (iterative, budgeted_plan or set_cover_plan)",
+                result.execution_mode
+            )
+        })?;
+    let budget = Budget::parse(&result.budget)?;
+    if result.uid.is_empty() || result.method.is_empty() || result.view_space.is_empty() {
+        return Err("empty uid, method or view_space".into());
+    }
+    if !result.checkpoints.contains_key(crate::select::TERMINAL) {
+        return Err("no `terminal` checkpoint".into());
+    }
+    let has = |m: &objview_episode::result::Metrics| m.nsc.contains_key(tau) && m.sc.contains_key(tau);
+    if let Some((name, _)) = result.checkpoints.iter().find(|(_, c)| !has(&c.metrics)) {
+        return Err(format!("checkpoint `{name}` has no NSC@{tau} or SC@{tau}"));
+    }
+    if let Some(s) = result.steps.iter().find(|s| !has(&s.metrics)) {
+        return Err(format!("step {} has no NSC@{tau} or SC@{tau}", s.step));
+    }
+    Ok(Episode { source, mode, budget, result })
+}
+
+/// A method must have one family and one execution mode; the error names the later line.
+fn check_methods(files: &[InputFile], episodes: &[Episode]) -> Result<(), ReportError> {
+    let mut first: BTreeMap<&str, &Episode> = BTreeMap::new();
+    for e in episodes {
+        let r = &e.result;
+        let Some(f) = first.get(r.method.as_str()) else {
+            first.insert(&r.method, e);
+            continue;
+        };
+        let bad = |field: &str, here: &str, there: &str| {
+            ReportError::bad_line(
+                &files[e.source.file].path,
+                e.source.line,
+                format!(
+                    "method '{}' has {field} '{here}' here but '{there}' at {}",
+                    r.method,
+                    locate(files, f.source)
+                ),
+            )
+        };
+        if r.family != f.result.family {
+            return Err(bad("family", &r.family, &f.result.family));
+        }
+        if e.mode != f.mode {
+            return Err(bad("execution_mode", &r.execution_mode, &f.result.execution_mode));
+        }
+    }
+    Ok(())
+}
+
+fn terminal_views(e: &Episode) -> usize {
+    e.result.checkpoints.get(crate::select::TERMINAL).map_or(0, |c| c.metrics.views)
+}
+
+fn duplicate(kind: DuplicateKind, kept: &Episode, dropped: &Episode) -> Duplicate {
+    let r = &dropped.result;
+    Duplicate {
+        kind,
+        uid: r.uid.clone(),
+        method: r.method.clone(),
+        view_space: r.view_space.clone(),
+        budget: r.budget.clone(),
+        seed: r.seed,
+        kept: kept.source,
+        dropped: dropped.source,
+    }
+}
+
+/// The two duplicate rules of the module docs.
+fn deduplicate(raw: Vec<Episode>) -> (Vec<Episode>, Vec<Duplicate>) {
+    let mut duplicates = Vec::new();
+    // Same key: the last one wins.
+    let mut last: BTreeMap<(String, String, String, String, u64), usize> = BTreeMap::new();
+    for (i, e) in raw.iter().enumerate() {
+        let r = &e.result;
+        let key = (r.uid.clone(), r.method.clone(), r.view_space.clone(), r.budget.clone(), r.seed);
+        if let Some(prev) = last.insert(key, i) {
+            duplicates.push(duplicate(DuplicateKind::SameKey, e, &raw[prev]));
+        }
+    }
+    let kept: BTreeSet<usize> = last.into_values().collect();
+    // Iterative runs under several budgets: the most views win, the later on a tie.
+    let mut best: BTreeMap<(String, String, String, u64), usize> = BTreeMap::new();
+    let mut dropped = BTreeSet::new();
+    for &i in &kept {
+        let e = &raw[i];
+        if e.mode != ExecutionMode::Iterative {
+            continue;
+        }
+        let r = &e.result;
+        let key = (r.uid.clone(), r.method.clone(), r.view_space.clone(), r.seed);
+        match best.get(&key).copied() {
+            None => {
+                best.insert(key, i);
+            }
+            Some(j) => {
+                let newer_wins = (terminal_views(e), e.source) > (terminal_views(&raw[j]), raw[j].source);
+                let (win, lose) = if newer_wins { (i, j) } else { (j, i) };
+                duplicates.push(duplicate(DuplicateKind::IterativeBudgets, &raw[win], &raw[lose]));
+                dropped.insert(lose);
+                best.insert(key, win);
+            }
+        }
+    }
+    duplicates.sort_by_key(|d| d.dropped);
+    let episodes =
+        raw.into_iter().enumerate().filter(|(i, _)| kept.contains(i) && !dropped.contains(i)).map(|(_, e)| e);
+    (episodes.collect(), duplicates)
+}
+
+/// τ keys present in the NSC and SC of every checkpoint and step of every episode.
+fn common_taus(episodes: &[Episode]) -> Vec<String> {
+    let mut common: Option<BTreeSet<String>> = None;
+    for e in episodes {
+        let metrics = e
+            .result
+            .checkpoints
+            .values()
+            .map(|c| &c.metrics)
+            .chain(e.result.steps.iter().map(|s| &s.metrics));
+        for m in metrics {
+            let here: BTreeSet<String> = m.nsc.keys().filter(|k| m.sc.contains_key(*k)).cloned().collect();
+            common = Some(match common {
+                None => here,
+                Some(c) => c.intersection(&here).cloned().collect(),
+            });
+        }
+    }
+    common.unwrap_or_default().into_iter().collect()
+}

@@ -135,6 +135,15 @@ pub fn bench_episode(a: EpisodeBenchArgs) -> Result<()> {
         1e3 * med_late,
         wall
     );
+    let stage = |i: usize| stats(r.steps.iter().map(|s| s.stage_seconds[i]).collect()).0;
+    let stages = [stage(0), stage(1), stage(2), stage(3)];
+    println!(
+        "  by stage (medians): render {:.1} ms, fusion {:.1} ms, GT distances (SC, CD) {:.1} ms, reference distances (NSC) + MS {:.1} ms",
+        1e3 * stages[0],
+        1e3 * stages[1],
+        1e3 * stages[2],
+        1e3 * stages[3]
+    );
     let mut planners = Vec::new();
     if a.planner_steps > 0 {
         for name in ["rse", "rse-mov"] {
@@ -173,6 +182,7 @@ pub fn bench_episode(a: EpisodeBenchArgs) -> Result<()> {
             "engine_step_seconds": engine,
             "engine_median_s": med,
             "engine_p90_s": p90,
+            "stage_median_s": {"render": stages[0], "fusion": stages[1], "gt": stages[2], "reference_ms": stages[3]},
             "planners": planners,
         });
         crate::common::write_json(path, &v)?;

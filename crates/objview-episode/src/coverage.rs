@@ -39,6 +39,14 @@ pub struct Targets {
     epoch: u32,
     /// Per target: bit j set once d² < τ_j² has held at some update (see [`Targets::coverage`]).
     ever: Vec<u8>,
+    /// Retire targets once covered at the smallest τ (coverage-only sets: NSC).
+    retire: bool,
+    /// Retired targets are skipped by every update.
+    retired: Vec<bool>,
+    /// Per target block: targets not retired.
+    live: Vec<u32>,
+    /// Target block of each target.
+    pt_block: Vec<u32>,
 }
 
 impl Targets {
@@ -81,6 +89,12 @@ impl Targets {
             i = j;
         }
         let n = pts.len();
+        let mut live = Vec::with_capacity(cell_start.len());
+        let mut pt_block = vec![0u32; n];
+        for (t, st) in cell_start.iter().enumerate() {
+            live.push(st[BLOCK_CELLS] - st[0]);
+            pt_block[st[0] as usize..st[BLOCK_CELLS] as usize].iter_mut().for_each(|b| *b = t as u32);
+        }
         Ok(Targets {
             domain,
             pts,
@@ -94,11 +108,28 @@ impl Targets {
             mark: vec![0; n],
             epoch: 0,
             ever: vec![0; n],
+            retire: false,
+            retired: vec![false; n],
+            live,
+            pt_block,
         })
+    }
+
+    /// Retire targets once they are covered at the smallest τ of [`Targets::coverage`]: they
+    /// are never looked at again, which makes a coverage-only set (NSC's reference) cheaper
+    /// as the episode goes on. Their d² is then stale, and [`Targets::update`]'s returned
+    /// distances ignore them; coverage fractions are unchanged (sticky coverage).
+    pub fn retire_covered(mut self) -> Targets {
+        self.retire = true;
+        self
     }
 
     /// Forgets every distance (as before the first update).
     pub fn reset(&mut self) {
+        self.retired.iter_mut().for_each(|r| *r = false);
+        for (t, st) in self.cell_start.iter().enumerate() {
+            self.live[t] = st[BLOCK_CELLS] - st[0];
+        }
         self.d2.iter_mut().for_each(|d| *d = f64::INFINITY);
         self.nn.iter_mut().for_each(|n| *n = NONE);
         self.far = (0..self.pts.len() as u32).collect();
@@ -143,13 +174,23 @@ impl Targets {
     pub fn coverage(&mut self, taus: &[f64]) -> Vec<f64> {
         let t2: Vec<f64> = taus.iter().map(|t| t * t).collect();
         let mut counts = vec![0usize; taus.len()];
-        for (e, &d) in self.ever.iter_mut().zip(&self.d2) {
-            for (j, &t) in t2.iter().enumerate().take(8) {
-                if d < t {
-                    *e |= 1 << j;
+        // The smallest τ: covered there means covered at every τ.
+        let jmin = (0..t2.len()).min_by(|&a, &b| t2[a].total_cmp(&t2[b])).unwrap_or(0);
+        for (i, (e, &d)) in self.ever.iter_mut().zip(&self.d2).enumerate() {
+            if !self.retired[i] {
+                for (j, &t) in t2.iter().enumerate().take(8) {
+                    if d < t {
+                        *e |= 1 << j;
+                    }
                 }
+                if self.retire && *e & (1 << jmin) != 0 {
+                    self.retired[i] = true;
+                    self.live[self.pt_block[i] as usize] -= 1;
+                }
+            }
+            for (j, c) in counts.iter_mut().enumerate().take(8) {
                 if *e & (1 << j) != 0 {
-                    counts[j] += 1;
+                    *c += 1;
                 }
             }
         }
@@ -200,6 +241,8 @@ impl Targets {
         let mut recompute: Vec<u32> = Vec::new();
         // Far targets whose nearest slot moved: full search (checked before the push, which
         // may point them at slots that changed now).
+        let retired = &self.retired;
+        self.far.retain(|&i| !retired[i as usize]);
         for &i in &self.far {
             let iu = i as usize;
             if self.nn[iu] != NONE && fused.changed_now(self.nn[iu]) {
@@ -215,17 +258,27 @@ impl Targets {
             let mut own = f64::INFINITY;
             for dz in -1..=1 {
                 for dy in -1..=1 {
-                    for dx in -1..=1 {
+                    // The three voxels along x, as runs of consecutive voxels within one block
+                    // (contiguous in the sorted points).
+                    let mut dx = -1;
+                    while dx <= 1 {
                         let kk = [k[0] + dx, k[1] + dy, k[2] + dz];
+                        let run_end = (dx + (BLOCK - 1 - (kk[0] & (BLOCK - 1)))).min(1);
+                        let first = dx;
+                        dx = run_end + 1;
                         let Some(b) = self.domain.block_index(block_of(kk)) else { continue };
                         let t = self.table[b];
-                        if t == NONE {
+                        if t == NONE || self.live[t as usize] == 0 {
                             continue;
                         }
                         let starts = &self.cell_start[t as usize];
                         let li = local_index(kk);
-                        for i in starts[li]..starts[li + 1] {
+                        let (lo, hi) = (starts[li], starts[li + (run_end - first) as usize + 1]);
+                        for i in lo..hi {
                             let iu = i as usize;
+                            if self.retired[iu] {
+                                continue;
+                            }
                             let d = dist2(self.pts[iu], q);
                             own = own.min(d);
                             if self.nn[iu] == s {
@@ -519,6 +572,24 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn retiring_covered_targets_keeps_coverage() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.05);
+        let tp: Vec<[f64; 3]> = patch(&mut rng, 6000);
+        let taus = [0.01, 0.02, 0.03];
+        let mut fused = FusedCloud::new(domain.clone());
+        let mut plain = Targets::new(domain.clone(), &tp, 0.03).unwrap();
+        let mut retiring = Targets::new(domain.clone(), &tp, 0.03).unwrap().retire_covered();
+        for _ in 0..8 {
+            let delta = fused.insert(&patch(&mut rng, 3000));
+            plain.update(&fused, &delta.changed);
+            retiring.update(&fused, &delta.changed);
+            assert_eq!(plain.coverage(&taus), retiring.coverage(&taus));
+        }
+        assert!(retiring.retired.iter().any(|&r| r), "some targets were retired");
     }
 
     #[test]

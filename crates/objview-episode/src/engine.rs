@@ -333,9 +333,12 @@ impl Episode {
         let t0 = Instant::now();
         let cam = Camera::new(pose, self.scene.intrinsics);
         self.renderer.render_into(&self.scene.mesh, &cam, &mut self.frame);
+        let t_render = t0.elapsed().as_secs_f64();
         let points = self.frame.observed_points();
         let delta = self.fused.insert(&points);
+        let t_fuse = t0.elapsed().as_secs_f64();
         let to_gt = self.gt.update(&self.fused, &delta.changed);
+        let t_gt = t0.elapsed().as_secs_f64();
         self.reference.update(&self.fused, &delta.changed);
         self.slot_gt_d2.resize(self.fused.len(), 0.0);
         for (&s, d) in delta.changed.iter().zip(to_gt) {
@@ -376,7 +379,12 @@ impl Episode {
                 triggered.push(format!("MS@{}", tau_key(m.delta)));
             }
         }
-        let engine_seconds = if self.settings.record_timings { t0.elapsed().as_secs_f64() } else { 0.0 };
+        let (engine_seconds, stage_seconds) = if self.settings.record_timings {
+            let total = t0.elapsed().as_secs_f64();
+            (total, [t_render, t_fuse - t_render, t_gt - t_fuse, total - t_gt])
+        } else {
+            (0.0, [0.0; 4])
+        };
         for name in triggered {
             self.checkpoints.insert(name, Checkpoint { step, metrics: metrics.clone() });
         }
@@ -393,6 +401,7 @@ impl Episode {
             ms_voxels,
             planner_seconds,
             engine_seconds,
+            stage_seconds,
         });
     }
 

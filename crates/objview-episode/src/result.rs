@@ -43,6 +43,9 @@ pub struct Step {
     pub planner_seconds: f64,
     /// Environment time for this view: render + fusion + metrics (seconds).
     pub engine_seconds: f64,
+    /// `engine_seconds` by stage: render, fusion, ground-truth distances (SC, CD), the rest
+    /// (reference distances for NSC, MS, bookkeeping).
+    pub stage_seconds: [f64; 4],
 }
 
 /// A named checkpoint (`K=5`, `MS@0.02`, `terminal`, …): the metrics at the view where it was

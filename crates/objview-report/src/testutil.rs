@@ -81,6 +81,7 @@ impl Spec {
                 ms_voxels: BTreeMap::new(),
                 planner_seconds: self.step_time,
                 engine_seconds: 0.01,
+                stage_seconds: [0.002, 0.002, 0.004, 0.002],
             })
             .collect();
         let cp = |s: usize| Checkpoint { step: s, metrics: self.metrics(s) };

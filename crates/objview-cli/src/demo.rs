@@ -220,6 +220,7 @@ fn demo_run(
 ) -> Result<PathBuf> {
     let mut args = crate::run::Args {
         planner: planner.into(),
+        params: Vec::new(),
         space: space.into(),
         budget: budget.into(),
         objects: vec![objects.to_path_buf()],

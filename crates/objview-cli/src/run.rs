@@ -23,6 +23,10 @@ pub struct Args {
     /// Planner: random-tsp, rse, rse-mov, random, oracle.
     #[arg(long)]
     pub planner: String,
+    /// A planner parameter `NAME=VALUE` (repeatable; VALUE is JSON or a bare string; dotted
+    /// names reach nested settings), e.g. `--param gamma=0.5 --param occupancy.resolution=32`.
+    #[arg(long = "param", value_name = "NAME=VALUE")]
+    pub params: Vec<String>,
     /// View space: whole, hemi, quarter, eighth, or a feasibility rule file (.json).
     #[arg(long, default_value = "whole")]
     pub space: String,
@@ -118,7 +122,8 @@ pub fn run(a: Args) -> Result<()> {
 pub fn execute(a: &Args) -> Result<RunSummary> {
     let t = Instant::now();
     let budget = Budget::parse(&a.budget).map_err(anyhow::Error::msg).context("--budget")?;
-    let probe = objview_planners::registry::by_name(&a.planner).map_err(anyhow::Error::msg)?;
+    let params = parse_params(&a.params)?;
+    let probe = objview_planners::registry::with_params(&a.planner, &params).map_err(anyhow::Error::msg)?;
     if probe.execution_mode() == objview_episode::ExecutionMode::BudgetedPlan && budget == Budget::Auto {
         bail!("--planner {} is a budgeted plan: give a fixed --budget K (e.g. 5 or 30), not auto", a.planner);
     }
@@ -198,7 +203,8 @@ pub fn execute(a: &Args) -> Result<RunSummary> {
                 normalization: a.normalize,
             };
             let scene = Arc::new(load_scene(&src, &space, &space_name, &settings, cache_dir.as_deref())?);
-            let mut planner = objview_planners::registry::by_name(&a.planner).map_err(anyhow::Error::msg)?;
+            let mut planner =
+                objview_planners::registry::with_params(&a.planner, &params).map_err(anyhow::Error::msg)?;
             let res = run_episode(
                 scene,
                 planner.as_mut(),
@@ -262,6 +268,17 @@ pub fn execute(a: &Args) -> Result<RunSummary> {
     })
 }
 
+/// `NAME=VALUE` pairs; VALUE is parsed as JSON, else taken as a string.
+fn parse_params(raw: &[String]) -> Result<Vec<(String, serde_json::Value)>> {
+    raw.iter()
+        .map(|p| {
+            let (k, v) = p.split_once('=').with_context(|| format!("--param {p:?}: expected NAME=VALUE"))?;
+            let value = serde_json::from_str(v).unwrap_or_else(|_| serde_json::Value::String(v.to_string()));
+            Ok((k.trim().to_string(), value))
+        })
+        .collect()
+}
+
 /// Refuses to resume a results file written by a different run (planner, space, budget, seed,
 /// candidates or settings), which would otherwise silently skip its objects.
 fn check_same_run(out: &Path, record: &serde_json::Value) -> Result<()> {
@@ -269,7 +286,16 @@ fn check_same_run(out: &Path, record: &serde_json::Value) -> Result<()> {
     for (i, line) in text.lines().enumerate() {
         let Ok(v) = serde_json::from_str::<serde_json::Value>(line) else { continue };
         let old = &v["settings"];
-        for key in ["planner", "view_space", "budget", "seed", "candidates", "start_pose", "episode"] {
+        for key in [
+            "planner",
+            "planner_params",
+            "view_space",
+            "budget",
+            "seed",
+            "candidates",
+            "start_pose",
+            "episode",
+        ] {
             let mut a = old[key].clone();
             let mut b = record[key].clone();
             if key == "episode" {

@@ -382,7 +382,22 @@ impl Targets {
         }
         for &i in &recompute {
             let iu = i as usize;
-            let (d, s) = fused.nearest(self.pts[iu], self.cap2);
+            let p = self.pts[iu];
+            // The current position of its (moved) nearest slot bounds the answer from above,
+            // which keeps the search local.
+            let (ub, ub_slot) = match self.nn[iu] {
+                NONE => (self.cap2, NONE),
+                n => {
+                    let d = dist2(p, fused.pos[n as usize]);
+                    if d < self.cap2 {
+                        (d, n)
+                    } else {
+                        (self.cap2, NONE)
+                    }
+                }
+            };
+            let (d, s) = fused.nearest(p, ub);
+            let (d, s) = if s == NONE { (ub, ub_slot) } else { (d, s) };
             if s == NONE {
                 self.d2[iu] = f64::INFINITY;
                 self.nn[iu] = NONE;

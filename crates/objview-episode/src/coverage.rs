@@ -14,7 +14,7 @@
 //! stored as +∞ and searches are bounded by it.
 
 use crate::fusion::FusedCloud;
-use crate::grid::{block_of, dist2, local_index, Domain, BLOCK, BLOCK_CELLS, NONE};
+use crate::grid::{block_of, dist2, local_index, nearest_in, Bucketed, Domain, BLOCK, BLOCK_CELLS, NONE};
 
 /// A fixed point set with its nearest-fused distances.
 #[derive(Debug, Clone)]
@@ -205,22 +205,8 @@ impl Targets {
 
     /// Instantaneous fraction of targets with d² < τ² for each τ.
     pub fn fractions(&self, taus: &[f64]) -> Vec<f64> {
-        let mut counts = vec![0usize; taus.len()];
-        let t2: Vec<f64> = taus.iter().map(|t| t * t).collect();
-        for &d in &self.d2 {
-            for (c, &t) in counts.iter_mut().zip(&t2) {
-                if d < t {
-                    *c += 1;
-                }
-            }
-        }
         let n = self.pts.len().max(1) as f64;
-        counts.into_iter().map(|c| c as f64 / n).collect()
-    }
-
-    /// Whether each target (in [`Targets::points`] order) has d² < τ².
-    pub fn covered(&self, tau: f64) -> Vec<bool> {
-        self.d2.iter().map(|&d| d < tau * tau).collect()
+        self.counts(taus).into_iter().map(|c| c as f64 / n).collect()
     }
 
     /// Mean d² (the GT→fused half of CD); ∞ while no fused point exists.
@@ -425,16 +411,6 @@ impl Targets {
     fn block_of_point(&self, i: usize) -> [i32; 3] {
         block_of(self.domain.key(self.pts[i]))
     }
-
-    /// Number of targets currently farther than h (or uncovered).
-    pub fn far_count(&self) -> usize {
-        self.far.len()
-    }
-
-    /// The keys of blocks holding targets (for tests and diagnostics).
-    pub fn num_blocks(&self) -> usize {
-        self.block_keys.len()
-    }
 }
 
 /// Squared distance between the boxes of two blocks (0 when they touch or overlap).
@@ -629,69 +605,42 @@ mod tests {
 impl Targets {
     /// Squared distance from `p` to the nearest target point (exact; ∞ when there are none).
     pub fn nearest_d2(&self, p: [f64; 3]) -> f64 {
-        let mut best = f64::INFINITY;
-        if self.pts.is_empty() {
-            return best;
-        }
-        let h = self.domain.h;
-        let k = self.domain.key(p);
-        for dz in -1..=1 {
-            for dy in -1..=1 {
-                for dx in -1..=1 {
-                    let kk = [k[0] + dx, k[1] + dy, k[2] + dz];
-                    for q in self.cell_points(kk) {
-                        best = best.min(dist2(p, *q));
-                    }
-                }
-            }
-        }
-        if best <= h * h {
-            return best;
-        }
-        let e = h * BLOCK as f64;
-        let bk = block_of(k);
-        let max_ring = 4;
-        for r in 0..=max_ring {
-            if r > 0 && ((r - 1) as f64 * e).powi(2) >= best {
-                return best;
-            }
-            crate::fusion::for_each_ring_block(bk, r, |b| {
-                if let Some(bi) = self.domain.block_index(b) {
-                    let t = self.table[bi];
-                    if t != NONE && self.domain.block_dist2(p, b) < best {
-                        let s = &self.cell_start[t as usize];
-                        for q in &self.pts[s[0] as usize..s[BLOCK_CELLS] as usize] {
-                            best = best.min(dist2(p, *q));
-                        }
-                    }
-                }
-            });
-        }
-        if (max_ring as f64 * e).powi(2) >= best {
-            return best;
-        }
-        for (t, key) in self.block_keys.iter().enumerate() {
-            if self.domain.block_dist2(p, *key) < best {
-                let s = &self.cell_start[t];
-                for q in &self.pts[s[0] as usize..s[BLOCK_CELLS] as usize] {
-                    best = best.min(dist2(p, *q));
-                }
-            }
-        }
-        best
+        nearest_in(self, p, f64::INFINITY).0
     }
 
-    /// The target points in fine voxel `k`.
-    #[inline]
-    fn cell_points(&self, k: [i32; 3]) -> &[[f64; 3]] {
-        let Some(b) = self.domain.block_index(block_of(k)) else { return &[] };
-        let t = self.table[b];
-        if t == NONE {
-            return &[];
-        }
+    /// The index range of the targets in target block `t`.
+    fn block_range(&self, t: u32) -> std::ops::Range<usize> {
         let s = &self.cell_start[t as usize];
-        let li = local_index(k);
-        &self.pts[s[li] as usize..s[li + 1] as usize]
+        s[0] as usize..s[BLOCK_CELLS] as usize
+    }
+}
+
+impl Bucketed for Targets {
+    fn domain(&self) -> &Domain {
+        &self.domain
+    }
+    fn for_cell<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], mut f: F) {
+        let Some(b) = self.domain.block_index(block_of(k)) else { return };
+        let t = self.table[b];
+        if t != NONE {
+            let s = &self.cell_start[t as usize];
+            let li = local_index(k);
+            for i in s[li]..s[li + 1] {
+                f(i, self.pts[i as usize]);
+            }
+        }
+    }
+    fn for_block<F: FnMut(u32, [f64; 3])>(&self, b: [i32; 3], mut f: F) {
+        let Some(bi) = self.domain.block_index(b) else { return };
+        let t = self.table[bi];
+        if t != NONE {
+            for i in self.block_range(t) {
+                f(i as u32, self.pts[i]);
+            }
+        }
+    }
+    fn block_keys(&self) -> Vec<[i32; 3]> {
+        self.block_keys.clone()
     }
 }
 

@@ -108,7 +108,6 @@ pub struct Episode {
     renderer: Renderer,
     frame: Frame,
     started: Instant,
-    setup_seconds: f64,
 }
 
 impl Episode {
@@ -156,7 +155,6 @@ impl Episode {
             renderer: Renderer::new(),
             frame: Frame::empty(cam),
             started,
-            setup_seconds: 0.0,
             scene,
             settings,
             method,
@@ -164,7 +162,6 @@ impl Episode {
             seed,
             start_pose,
         };
-        ep.setup_seconds = started.elapsed().as_secs_f64();
         ep.observe(start_pose, 0.0);
         Ok(ep)
     }
@@ -444,16 +441,6 @@ impl Episode {
                 0.0
             },
         }
-    }
-
-    /// Environment time of the set-up (seconds).
-    pub fn setup_seconds(&self) -> f64 {
-        self.setup_seconds
-    }
-
-    /// Per-step engine times so far (seconds).
-    pub fn engine_times(&self) -> Vec<f64> {
-        self.steps.iter().map(|s| s.engine_seconds).collect()
     }
 }
 

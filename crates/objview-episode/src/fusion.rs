@@ -8,7 +8,7 @@
 //! time) or moved (a voxel seen again). [`FusionDelta`] lists both: the coverage metrics update
 //! only around them.
 
-use crate::grid::{block_of, dist2, local_index, Domain, BLOCK_CELLS, NONE};
+use crate::grid::{block_of, local_index, nearest_in, Bucketed, Domain, BLOCK_CELLS, NONE};
 
 /// One allocated block: the slot of each of its fine voxels and the list of its slots.
 #[derive(Debug, Clone)]
@@ -178,92 +178,36 @@ impl FusedCloud {
     /// The nearest fused point to `p` with squared distance below `bound2` (exact; ties →
     /// smaller slot): `(d², slot)`, or `(bound2, NONE)` when there is none.
     pub fn nearest(&self, p: [f64; 3], bound2: f64) -> (f64, u32) {
-        let mut best = (bound2, NONE);
-        if self.pos.is_empty() {
-            return best;
-        }
-        let h = self.domain.h;
-        let k = self.domain.key(p);
-        // Fast path: the 27 fine voxels around p. Anything outside them is ≥ h away.
-        for dz in -1..=1 {
-            for dy in -1..=1 {
-                for dx in -1..=1 {
-                    let s = self.slot_at([k[0] + dx, k[1] + dy, k[2] + dz]);
-                    if s != NONE {
-                        consider(&mut best, dist2(p, self.pos[s as usize]), s);
-                    }
-                }
-            }
-        }
-        if best.0 <= h * h {
-            return best;
-        }
-        // Rings of blocks around p's block; after ring r everything unseen is ≥ r·e away.
-        let e = h * crate::grid::BLOCK as f64;
-        let bk = block_of(k);
-        let max_ring = 4;
-        for r in 0..=max_ring {
-            if r > 0 && ((r - 1) as f64 * e).powi(2) >= best.0 {
-                return best;
-            }
-            for_each_ring_block(bk, r, |b| {
-                if let Some(bi) = self.domain.block_index(b) {
-                    if let Some(blk) = self.block_at(bi) {
-                        if self.domain.block_dist2(p, b) < best.0 {
-                            for &s in &blk.slots {
-                                consider(&mut best, dist2(p, self.pos[s as usize]), s);
-                            }
-                        }
-                    }
-                }
-            });
-        }
-        if (max_ring as f64 * e).powi(2) >= best.0 {
-            return best;
-        }
-        // Far: every block, pruned by its box.
-        for blk in &self.blocks {
-            if self.domain.block_dist2(p, blk.key) < best.0 {
-                for &s in &blk.slots {
-                    consider(&mut best, dist2(p, self.pos[s as usize]), s);
-                }
-            }
-        }
-        best
+        nearest_in(self, p, bound2)
     }
 }
 
-#[inline]
-fn consider(best: &mut (f64, u32), d: f64, s: u32) {
-    if d < best.0 || (d == best.0 && best.1 != NONE && s < best.1) {
-        *best = (d, s);
+impl Bucketed for FusedCloud {
+    fn domain(&self) -> &Domain {
+        &self.domain
     }
-}
-
-/// Calls `f` for every block key at Chebyshev distance exactly `r` from `c`.
-pub fn for_each_ring_block(c: [i32; 3], r: i32, mut f: impl FnMut([i32; 3])) {
-    if r == 0 {
-        f(c);
-        return;
+    fn for_cell<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], mut f: F) {
+        let s = self.slot_at(k);
+        if s != NONE {
+            f(s, self.pos[s as usize]);
+        }
     }
-    for dz in -r..=r {
-        for dy in -r..=r {
-            let edge = dz.abs() == r || dy.abs() == r;
-            if edge {
-                for dx in -r..=r {
-                    f([c[0] + dx, c[1] + dy, c[2] + dz]);
-                }
-            } else {
-                f([c[0] - r, c[1] + dy, c[2] + dz]);
-                f([c[0] + r, c[1] + dy, c[2] + dz]);
+    fn for_block<F: FnMut(u32, [f64; 3])>(&self, b: [i32; 3], mut f: F) {
+        if let Some(blk) = self.domain.block_index(b).and_then(|bi| self.block_at(bi)) {
+            for &s in &blk.slots {
+                f(s, self.pos[s as usize]);
             }
         }
+    }
+    fn block_keys(&self) -> Vec<[i32; 3]> {
+        self.blocks.iter().map(|b| b.key).collect()
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::grid::dist2;
     use rand::{Rng, SeedableRng};
 
     fn domain() -> Domain {
@@ -286,17 +230,6 @@ mod tests {
         // Out of domain points are counted, not fused.
         assert_eq!(f.insert(&[[5.0, 0.0, 0.0]]).dropped, 1);
         assert_eq!(f.len(), 2);
-    }
-
-    #[test]
-    fn ring_covers_every_block_once() {
-        for r in 0..4 {
-            let mut seen = std::collections::HashSet::new();
-            for_each_ring_block([0, 0, 0], r, |b| assert!(seen.insert(b)));
-            let n = (2 * r + 1).pow(3) - if r > 0 { (2 * r - 1).pow(3) } else { 0 };
-            assert_eq!(seen.len() as i32, n);
-            assert!(seen.iter().all(|b| b.iter().map(|x| x.abs()).max() == Some(r)));
-        }
     }
 
     #[test]

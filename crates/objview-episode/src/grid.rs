@@ -110,6 +110,90 @@ pub fn dist2(a: [f64; 3], b: [f64; 3]) -> f64 {
     d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
 }
 
+/// A point set bucketed on the block grid, as [`nearest_in`] searches it. Points are named by
+/// a `u32` index (a fused slot, a target position).
+pub trait Bucketed {
+    /// The grid.
+    fn domain(&self) -> &Domain;
+    /// Calls `f(index, position)` for every point in fine voxel `k`.
+    fn for_cell<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], f: F);
+    /// Calls `f(index, position)` for every point in the block with block key `b`, if the block
+    /// holds points.
+    fn for_block<F: FnMut(u32, [f64; 3])>(&self, b: [i32; 3], f: F);
+    /// The block keys of every block holding points.
+    fn block_keys(&self) -> Vec<[i32; 3]>;
+}
+
+/// The nearest point of `set` to `p` with squared distance below `bound2` (exact; ties → the
+/// smaller index): `(d², index)`, or `(bound2, NONE)` when there is none. The 27 fine voxels
+/// around p first (anything outside them is ≥ h away), then rings of blocks (after ring r
+/// everything unseen is ≥ r·e away), then every block, pruned by its box.
+pub fn nearest_in<S: Bucketed>(set: &S, p: [f64; 3], bound2: f64) -> (f64, u32) {
+    let mut best = (bound2, NONE);
+    let consider = |best: &mut (f64, u32), i: u32, q: [f64; 3]| {
+        let d = dist2(p, q);
+        if d < best.0 || (d == best.0 && best.1 != NONE && i < best.1) {
+            *best = (d, i);
+        }
+    };
+    let domain = set.domain();
+    let h = domain.h;
+    let k = domain.key(p);
+    for dz in -1..=1 {
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                set.for_cell([k[0] + dx, k[1] + dy, k[2] + dz], |i, q| consider(&mut best, i, q));
+            }
+        }
+    }
+    if best.0 <= h * h {
+        return best;
+    }
+    let e = h * BLOCK as f64;
+    let bk = block_of(k);
+    let max_ring = 4;
+    for r in 0..=max_ring {
+        if r > 0 && ((r - 1) as f64 * e).powi(2) >= best.0 {
+            return best;
+        }
+        for_each_ring_block(bk, r, |b| {
+            if domain.block_dist2(p, b) < best.0 {
+                set.for_block(b, |i, q| consider(&mut best, i, q));
+            }
+        });
+    }
+    if (max_ring as f64 * e).powi(2) >= best.0 {
+        return best;
+    }
+    for b in set.block_keys() {
+        if domain.block_dist2(p, b) < best.0 {
+            set.for_block(b, |i, q| consider(&mut best, i, q));
+        }
+    }
+    best
+}
+
+/// Calls `f` for every block key at Chebyshev distance exactly `r` from `c`.
+pub fn for_each_ring_block(c: [i32; 3], r: i32, mut f: impl FnMut([i32; 3])) {
+    if r == 0 {
+        f(c);
+        return;
+    }
+    for dz in -r..=r {
+        for dy in -r..=r {
+            let edge = dz.abs() == r || dy.abs() == r;
+            if edge {
+                for dx in -r..=r {
+                    f([c[0] + dx, c[1] + dy, c[2] + dz]);
+                }
+            } else {
+                f([c[0] - r, c[1] + dy, c[2] + dz]);
+                f([c[0] + r, c[1] + dy, c[2] + dz]);
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -130,5 +214,16 @@ mod tests {
         // Box distance: block [0,0.04)³.
         assert!((d.block_dist2([0.05, 0.02, 0.02], [0, 0, 0]) - 1e-4).abs() < 1e-15);
         assert_eq!(d.block_dist2([0.01, 0.02, 0.03], [0, 0, 0]), 0.0);
+    }
+
+    #[test]
+    fn ring_covers_every_block_once() {
+        for r in 0..4 {
+            let mut seen = std::collections::HashSet::new();
+            for_each_ring_block([0, 0, 0], r, |b| assert!(seen.insert(b)));
+            let n = (2 * r + 1).pow(3) - if r > 0 { (2 * r - 1).pow(3) } else { 0 };
+            assert_eq!(seen.len() as i32, n);
+            assert!(seen.iter().all(|b| b.iter().map(|x| x.abs()).max() == Some(r)));
+        }
     }
 }

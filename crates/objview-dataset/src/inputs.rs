@@ -207,14 +207,7 @@ impl fmt::Display for Shard {
 }
 
 /// 64-bit FNV-1a: a fixed, platform-independent hash (std's hasher is randomly seeded).
-pub fn fnv1a64(bytes: &[u8]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for &b in bytes {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(0x0100_0000_01b3);
-    }
-    h
-}
+pub use objview_geom::hash::fnv1a64;
 
 #[cfg(test)]
 mod tests {

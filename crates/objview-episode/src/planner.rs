@@ -8,6 +8,7 @@
 use std::fmt;
 use std::sync::Arc;
 
+use objview_geom::hash::{splitmix64, Fnv};
 use objview_geom::{Mesh, Pose};
 use objview_render::Intrinsics;
 use serde::{Deserialize, Serialize};
@@ -248,28 +249,14 @@ pub trait Planner: Send {
 /// the object id, the view-space name and the budget label, so that every (object, space,
 /// budget) gets its own reproducible stream.
 pub fn episode_seed(seed: u64, object_id: &str, view_space: &str, budget: Budget) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut eat = |bytes: &[u8]| {
-        for &b in bytes {
-            h ^= b as u64;
-            h = h.wrapping_mul(0x0000_0100_0000_01b3);
-        }
-        h ^= 0xff;
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    };
-    eat(&seed.to_le_bytes());
-    eat(object_id.as_bytes());
-    eat(view_space.as_bytes());
-    eat(budget.label().as_bytes());
-    splitmix64(h)
-}
-
-/// SplitMix64 finalizer.
-pub fn splitmix64(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
+    let mut h = Fnv::default();
+    for field in
+        [&seed.to_le_bytes()[..], object_id.as_bytes(), view_space.as_bytes(), budget.label().as_bytes()]
+    {
+        h.eat(field);
+        h.eat(&[0xff]); // field separator: ("ab", "c") ≠ ("a", "bc")
+    }
+    splitmix64(h.0)
 }
 
 #[cfg(test)]

@@ -11,6 +11,7 @@
 
 use std::path::{Path, PathBuf};
 
+use objview_geom::hash::Fnv;
 use objview_geom::{Mesh, Pose};
 use objview_render::{Camera, Intrinsics, Renderer};
 use objview_views::{ViewSet, ViewSpace};
@@ -69,31 +70,6 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), EpisodeError> {
     let tmp = path.with_extension(format!("tmp{}", std::process::id()));
     std::fs::write(&tmp, bytes).map_err(|e| EpisodeError::Io(tmp.display().to_string(), e.to_string()))?;
     std::fs::rename(&tmp, path).map_err(|e| EpisodeError::Io(path.display().to_string(), e.to_string()))
-}
-
-/// FNV-1a 64 over a byte stream.
-#[derive(Debug, Clone)]
-pub struct Fnv(pub u64);
-
-impl Default for Fnv {
-    fn default() -> Self {
-        Fnv(0xcbf2_9ce4_8422_2325)
-    }
-}
-
-impl Fnv {
-    pub fn eat(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.0 ^= b as u64;
-            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
-        }
-    }
-
-    pub fn eat_f64s(&mut self, xs: &[f64]) {
-        for x in xs {
-            self.eat(&x.to_bits().to_le_bytes());
-        }
-    }
 }
 
 /// A hash of the mesh geometry (positions and triangles).

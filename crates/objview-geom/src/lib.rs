@@ -6,6 +6,7 @@
 //! plain types defined here: [`Mesh`], [`Pose`] and point clouds as `Vec<[f64; 3]>`.
 
 pub mod error;
+pub mod hash;
 pub mod mesh;
 pub mod pose;
 

@@ -337,7 +337,7 @@ mod tests {
         let mut counts = [0usize; 20];
         let trials = 3000u64;
         for seed in 0..trials {
-            for i in draw(&feasible, 3, objview_episode::planner::splitmix64(seed)) {
+            for i in draw(&feasible, 3, objview_geom::hash::splitmix64(seed)) {
                 counts[i] += 1;
             }
         }

@@ -13,6 +13,7 @@
 
 use std::path::{Path, PathBuf};
 
+use objview_geom::hash::splitmix64;
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
@@ -123,13 +124,6 @@ pub struct Jitter {
     pub dx: f64,
     pub dy: f64,
     pub seed: u64,
-}
-
-fn splitmix64(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
 }
 
 impl Jitter {

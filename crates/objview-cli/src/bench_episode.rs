@@ -7,10 +7,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use objview_episode::{
-    run_episode, scene_from_parts, Action, Budget, Environment, EpisodeContext, EpisodeSettings,
-    ExecutionMode, Family, Observation, Planner, PlannerError, StopReason,
-};
+use objview_episode::{run_episode, scene_from_parts, Budget, EpisodeSettings, ExecutionMode, Scripted};
 use objview_geom::cloud::sample_surface;
 use objview_geom::normalize::{normalize, Normalization};
 use objview_geom::Pose;
@@ -37,32 +34,6 @@ pub struct EpisodeBenchArgs {
     /// Also write the figures as JSON.
     #[arg(long)]
     pub json: Option<std::path::PathBuf>,
-}
-
-/// Moves to a fixed list of poses, then stops.
-struct Script(Vec<Pose>, usize);
-
-impl Planner for Script {
-    fn name(&self) -> &str {
-        "script"
-    }
-    fn family(&self) -> Family {
-        Family::Baseline
-    }
-    fn execution_mode(&self) -> ExecutionMode {
-        ExecutionMode::SetCoverPlan
-    }
-    fn params(&self) -> serde_json::Value {
-        json!({})
-    }
-    fn reset(&mut self, _: &EpisodeContext, _: &dyn Environment) -> Result<(), PlannerError> {
-        self.1 = 0;
-        Ok(())
-    }
-    fn act(&mut self, _: &Observation, _: &dyn Environment) -> Result<Action, PlannerError> {
-        self.1 += 1;
-        Ok(self.0.get(self.1 - 1).map(Action::move_to).unwrap_or(Action::stop(StopReason::PlanEnd)))
-    }
 }
 
 fn stats(mut v: Vec<f64>) -> (f64, f64, f64) {
@@ -110,7 +81,7 @@ pub fn bench_episode(a: EpisodeBenchArgs) -> Result<()> {
     let candidates = Arc::new(ViewSet::resolve("tammes-360")?.poses(settings.view_radius));
     // A spread order: every 37th candidate (37 is coprime with 360).
     let order: Vec<Pose> = (0..a.views.min(360)).map(|i| candidates[(i * 37) % 360]).collect();
-    let mut script = Script(order, 0);
+    let mut script = Scripted::poses(&order, ExecutionMode::SetCoverPlan);
     let t = Instant::now();
     let r = run_episode(
         scene.clone(),

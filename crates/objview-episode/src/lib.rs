@@ -8,6 +8,7 @@
 //! - [`reference`] — the observable reference (NSC's denominator), cached on disk.
 //! - [`stabilization`] — MS@δ.
 //! - [`scene`] — loading the hidden object (mesh, ground truth, reference).
+//! - [`scripted`] — a planner that plays a fixed action list (replays, tests, benchmarks).
 //! - [`engine`] — the environment, checkpoints, budgets and terminal reasons.
 //! - [`result`] — the JSON Lines result format; [`settings`] — every SPEC §5 constant.
 
@@ -25,6 +26,7 @@ pub mod grid;
 pub mod reference;
 pub mod result;
 pub mod scene;
+pub mod scripted;
 pub mod settings;
 pub mod stabilization;
 
@@ -32,6 +34,7 @@ pub use engine::{run_episode, scene_domain, Episode, MethodInfo, Scene, Terminal
 pub use reference::{observable_reference, Reference};
 pub use result::{EpisodeResult, TerminalSource};
 pub use scene::{load_scene, scene_from_parts, SceneSource};
+pub use scripted::Scripted;
 pub use settings::EpisodeSettings;
 
 /// Errors of episode set-up (a running episode never fails: it ends with a terminal reason).

@@ -6,7 +6,7 @@ use std::sync::{Arc, OnceLock};
 
 use objview_episode::{
     run_episode, scene_from_parts, Action, Budget, Environment, EpisodeContext, EpisodeResult,
-    EpisodeSettings, ExecutionMode, Family, Observation, Planner, PlannerError, Scene, StopReason,
+    EpisodeSettings, ExecutionMode, Family, Observation, Planner, PlannerError, Scene, Scripted, StopReason,
 };
 use objview_geom::cloud::sample_surface;
 use objview_geom::Pose;
@@ -44,42 +44,6 @@ fn tammes360() -> Arc<Vec<Pose>> {
     Arc::new(ViewSet::resolve("tammes-360").unwrap().poses(3.0))
 }
 
-/// Plays a fixed list of actions, then stops with plan_end.
-struct Script {
-    actions: Vec<Action>,
-    mode: ExecutionMode,
-    i: usize,
-}
-
-impl Script {
-    fn new(actions: Vec<Action>, mode: ExecutionMode) -> Script {
-        Script { actions, mode, i: 0 }
-    }
-}
-
-impl Planner for Script {
-    fn name(&self) -> &str {
-        "script"
-    }
-    fn family(&self) -> Family {
-        Family::Baseline
-    }
-    fn execution_mode(&self) -> ExecutionMode {
-        self.mode
-    }
-    fn params(&self) -> serde_json::Value {
-        serde_json::json!({})
-    }
-    fn reset(&mut self, _ctx: &EpisodeContext, _env: &dyn Environment) -> Result<(), PlannerError> {
-        self.i = 0;
-        Ok(())
-    }
-    fn act(&mut self, _obs: &Observation, _env: &dyn Environment) -> Result<Action, PlannerError> {
-        self.i += 1;
-        Ok(self.actions.get(self.i - 1).cloned().unwrap_or(Action::stop(StopReason::PlanEnd)))
-    }
-}
-
 fn run(
     space: &str,
     actions: Vec<Action>,
@@ -97,7 +61,7 @@ fn run_in(
     budget: Budget,
     s: &EpisodeSettings,
 ) -> EpisodeResult {
-    let mut p = Script::new(actions, mode);
+    let mut p = Scripted::new(actions, mode);
     run_episode(sc, &mut p, s, budget, 0, start_pose(3.0), tammes360(), serde_json::json!({})).unwrap()
 }
 

@@ -26,15 +26,7 @@ fn reset_peak_rss() -> bool {
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n == 0 {
-        f64::NAN
-    } else if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
+    objview_geom::stats::median(&mut v)
 }
 
 /// Writes built-in object `name` with about `triangles` triangles (0: its default detail) as OBJ.

@@ -36,13 +36,10 @@ pub struct EpisodeBenchArgs {
     pub json: Option<std::path::PathBuf>,
 }
 
+/// (median, nearest-rank p90, max).
 fn stats(mut v: Vec<f64>) -> (f64, f64, f64) {
-    v.sort_by(f64::total_cmp);
-    if v.is_empty() {
-        return (f64::NAN, f64::NAN, f64::NAN);
-    }
-    let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
-    (q(0.5), q(0.9), v[v.len() - 1])
+    let med = objview_geom::stats::median(&mut v); // sorts
+    (med, objview_geom::stats::percentile(&v, 0.9), objview_geom::stats::percentile(&v, 1.0))
 }
 
 pub fn bench_episode(a: EpisodeBenchArgs) -> Result<()> {

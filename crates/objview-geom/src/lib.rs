@@ -9,6 +9,7 @@ pub mod error;
 pub mod hash;
 pub mod mesh;
 pub mod pose;
+pub mod stats;
 
 pub use error::GeomError;
 pub use mesh::{Appearance, Mesh};

@@ -45,26 +45,12 @@ pub struct RenderBenchResult {
 }
 
 fn stats(mut ms: Vec<f64>, pixels: usize) -> TimingStats {
-    ms.sort_by(f64::total_cmp);
-    let q = |p: f64| {
-        if ms.is_empty() {
-            return f64::NAN;
-        }
-        // Nearest-rank percentile.
-        let i = ((p * ms.len() as f64).ceil() as usize).clamp(1, ms.len()) - 1;
-        ms[i]
-    };
-    let median = if ms.is_empty() {
-        f64::NAN
-    } else if ms.len() % 2 == 1 {
-        ms[ms.len() / 2]
-    } else {
-        0.5 * (ms[ms.len() / 2 - 1] + ms[ms.len() / 2])
-    };
+    use objview_geom::stats::{median, percentile};
+    let median = median(&mut ms); // sorts
     TimingStats {
         median_ms: median,
-        p10_ms: q(0.1),
-        p90_ms: q(0.9),
+        p10_ms: percentile(&ms, 0.1),
+        p90_ms: percentile(&ms, 0.9),
         mrays_per_s: pixels as f64 / (median * 1e-3) / 1e6,
     }
 }

@@ -50,7 +50,7 @@ pub fn bench_visibility(
         set = VoxelSet::from_points(cloud, r)?;
         builds.push(ms(t));
     }
-    let set_build_ms = median(&mut builds);
+    let set_build_ms = objview_geom::stats::median(&mut builds);
     let t = Instant::now();
     let caster = InverseCaster::new(&set);
     let caster_build_ms = ms(t);
@@ -68,7 +68,7 @@ pub fn bench_visibility(
         }
     }
     let inverse_min_ms = times.iter().copied().fold(f64::INFINITY, f64::min);
-    let inverse_median_ms = median(&mut times);
+    let inverse_median_ms = objview_geom::stats::median(&mut times);
     let inverse_mean_observed = observed as f64 / cameras.len().max(1) as f64;
     let (mut mesh_median_ms, mut mesh_render_median_ms, mut mesh_mean_observed) = (None, None, None);
     let nm = mesh_views.min(cameras.len());
@@ -82,8 +82,8 @@ pub fn bench_visibility(
             observed += indices_of_points(&set, &frame.observed_points()).len();
             times.push(ms(t));
         }
-        mesh_median_ms = Some(median(&mut times));
-        mesh_render_median_ms = Some(median(&mut renders));
+        mesh_median_ms = Some(objview_geom::stats::median(&mut times));
+        mesh_render_median_ms = Some(objview_geom::stats::median(&mut renders));
         mesh_mean_observed = Some(observed as f64 / nm as f64);
     }
     Ok(VisibilityBench {
@@ -101,17 +101,4 @@ pub fn bench_visibility(
 
 fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(|a, b| a.total_cmp(b));
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
 }

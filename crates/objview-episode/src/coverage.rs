@@ -8,13 +8,18 @@
 //!   whose nearest slot moved away is recomputed. This is exact for every target whose
 //!   distance was ≤ h (any point closer than h lies in those 27 voxels).
 //! - *far* targets (distance > h, or none yet): the minimum with the changed slots, found
-//!   block by block with box pruning; recomputed from scratch when their nearest slot moved.
+//!   block by block with box pruning. When a far target's nearest slot moved, every unchanged
+//!   slot is still at least its previous distance away, so the minimum over the changed slots
+//!   is the answer whenever it is no larger than that; otherwise (and for near targets whose
+//!   slot moved away) a full nearest search runs, bounded by the moved slot's new distance.
 //!
 //! With a cap (NSC needs distances only up to max τ), distances at or above the cap are
 //! stored as +∞ and searches are bounded by it.
 
 use crate::fusion::FusedCloud;
-use crate::grid::{block_of, dist2, local_index, nearest_in, Bucketed, Domain, BLOCK, BLOCK_CELLS, NONE};
+use crate::grid::{
+    block_of, dist2, local_index, nearest_in, Aabb, Bucketed, Domain, SuperGrid, BLOCK, BLOCK_CELLS, NONE,
+};
 
 /// A fixed point set with its nearest-fused distances.
 #[derive(Debug, Clone)]
@@ -26,8 +31,8 @@ pub struct Targets {
     table: Vec<u32>,
     /// Per target block: start offsets of its 512 voxels into `pts` (513 entries).
     cell_start: Vec<[u32; BLOCK_CELLS + 1]>,
-    /// Per target block: its block key.
-    block_keys: Vec<[i32; 3]>,
+    /// The target blocks by superblock (far nearest searches).
+    supergrid: SuperGrid,
     /// Nearest-fused d² (∞: none, or ≥ cap).
     pub d2: Vec<f64>,
     /// Nearest slot, or NONE.
@@ -68,7 +73,7 @@ impl Targets {
         keyed.sort_unstable();
         let mut table = vec![NONE; domain.num_blocks()];
         let mut cell_start: Vec<[u32; BLOCK_CELLS + 1]> = Vec::new();
-        let mut block_keys = Vec::new();
+        let mut supergrid = SuperGrid::new(&domain);
         let mut pts = Vec::with_capacity(keyed.len());
         let mut i = 0;
         while i < keyed.len() {
@@ -85,7 +90,11 @@ impl Targets {
             starts[BLOCK_CELLS] = j as u32;
             table[b as usize] = cell_start.len() as u32;
             cell_start.push(starts);
-            block_keys.push(domain.block_key(b as usize));
+            if let Some(h) = supergrid.add_block(domain.block_key(b as usize)) {
+                for &p in &pts[starts[0] as usize..j] {
+                    supergrid.grow(h, p);
+                }
+            }
             i = j;
         }
         let n = pts.len();
@@ -100,7 +109,7 @@ impl Targets {
             pts,
             table,
             cell_start,
-            block_keys,
+            supergrid,
             d2: vec![f64::INFINITY; n],
             nn: vec![NONE; n],
             far: (0..n as u32).collect(),
@@ -297,9 +306,13 @@ impl Targets {
                 let mut max_d2: f64 = 0.0;
                 while end < far.len() && self.block_of_point(far[end] as usize) == tb {
                     let iu = far[end] as usize;
-                    if self.mark[iu] != self.epoch {
-                        max_d2 = max_d2.max(self.d2[iu].min(self.cap2));
-                    }
+                    let bound = if self.mark[iu] == self.epoch {
+                        // Nearest slot moved: its new position bounds the answer.
+                        self.moved_bound(fused, iu)
+                    } else {
+                        self.d2[iu].min(self.cap2)
+                    };
+                    max_d2 = max_d2.max(bound);
                     end += 1;
                 }
                 if max_d2 > 0.0 {
@@ -310,15 +323,18 @@ impl Targets {
                         start = end;
                         continue;
                     }
-                    cand.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                    cand.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
                     for &i in &far[start..end] {
                         let iu = i as usize;
-                        if self.mark[iu] == self.epoch {
-                            continue;
-                        }
                         let p = self.pts[iu];
-                        let mut best = (self.d2[iu].min(self.cap2), self.nn[iu]);
-                        if best.0 <= 4.0 * h2 {
+                        let moved = self.mark[iu] == self.epoch;
+                        let mut best = if moved {
+                            let b = self.moved_bound(fused, iu);
+                            (b, if b < self.cap2 { self.nn[iu] } else { NONE })
+                        } else {
+                            (self.d2[iu].min(self.cap2), self.nn[iu])
+                        };
+                        if !moved && best.0 <= 4.0 * h2 {
                             // Close: the changed slots within √d² lie in the fine voxels
                             // within ⌈√d²/h⌉ ≤ 2 of p's.
                             let k = self.domain.key(p);
@@ -347,7 +363,7 @@ impl Targets {
                                 break;
                             }
                             let g = &groups.blocks[gi];
-                            if self.domain.block_dist2(p, g.key) >= best.0 {
+                            if g.aabb.dist2(p) >= best.0 {
                                 continue;
                             }
                             for &s in &groups.slots[g.range.0..g.range.1] {
@@ -357,7 +373,17 @@ impl Targets {
                                 }
                             }
                         }
-                        if best.0 < self.d2[iu] && best.0 < self.cap2 {
+                        if moved {
+                            // Every unchanged slot is at least as far as the stored distance
+                            // (the minimum before this step, or a changed slot's distance the
+                            // push found): if a changed slot is that close, it is the answer
+                            // and no search is needed.
+                            if best.0 <= self.d2[iu] && best.1 != NONE {
+                                self.d2[iu] = best.0;
+                                self.nn[iu] = best.1;
+                                self.mark[iu] = 0;
+                            }
+                        } else if best.0 < self.d2[iu] && best.0 < self.cap2 {
                             self.d2[iu] = best.0;
                             self.nn[iu] = best.1;
                         }
@@ -368,6 +394,9 @@ impl Targets {
         }
         for &i in &recompute {
             let iu = i as usize;
+            if self.mark[iu] != self.epoch {
+                continue; // resolved by the far pass
+            }
             let p = self.pts[iu];
             // The current position of its (moved) nearest slot bounds the answer from above,
             // which keeps the search local.
@@ -407,6 +436,15 @@ impl Targets {
         slot_min
     }
 
+    /// For a target whose nearest slot moved in this step: d² to that slot's new position,
+    /// capped (an upper bound of its new distance).
+    fn moved_bound(&self, fused: &FusedCloud, i: usize) -> f64 {
+        match self.nn[i] {
+            NONE => self.cap2,
+            n => dist2(self.pts[i], fused.pos[n as usize]).min(self.cap2),
+        }
+    }
+
     /// Target-block index of point `i` (points are sorted by block).
     fn block_of_point(&self, i: usize) -> [i32; 3] {
         block_of(self.domain.key(self.pts[i]))
@@ -435,6 +473,8 @@ struct ChangedBlocks {
 struct ChangedBlock {
     key: [i32; 3],
     range: (usize, usize),
+    /// The box of its changed slots' positions (a tighter bound than the block's cube).
+    aabb: Aabb,
 }
 
 impl ChangedBlocks {
@@ -447,12 +487,17 @@ impl ChangedBlocks {
         while i < v.len() {
             let b = v[i].0;
             let start = slots.len();
+            let mut aabb = Aabb::EMPTY;
             while i < v.len() && v[i].0 == b {
                 slots.push(v[i].1);
+                aabb.grow(fused.pos[v[i].1 as usize]);
                 i += 1;
             }
-            blocks
-                .push(ChangedBlock { key: fused.domain.block_key(b as usize), range: (start, slots.len()) });
+            blocks.push(ChangedBlock {
+                key: fused.domain.block_key(b as usize),
+                range: (start, slots.len()),
+                aabb,
+            });
         }
         let mut lookup = vec![NONE; fused.domain.num_blocks()];
         for (gi, g) in blocks.iter().enumerate() {
@@ -639,8 +684,8 @@ impl Bucketed for Targets {
             }
         }
     }
-    fn block_keys(&self) -> Vec<[i32; 3]> {
-        self.block_keys.clone()
+    fn supergrid(&self) -> &SuperGrid {
+        &self.supergrid
     }
 }
 

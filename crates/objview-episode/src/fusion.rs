@@ -8,7 +8,9 @@
 //! time) or moved (a voxel seen again). [`FusionDelta`] lists both: the coverage metrics update
 //! only around them.
 
-use crate::grid::{block_of, local_index, nearest_in, Bucketed, Domain, BLOCK_CELLS, NONE};
+use crate::grid::{
+    block_of, local_index, nearest_in, Bucketed, Domain, SuperGrid, SuperHandle, BLOCK_CELLS, NONE,
+};
 
 /// One allocated block: the slot of each of its fine voxels and the list of its slots.
 #[derive(Debug, Clone)]
@@ -16,6 +18,8 @@ pub struct FusedBlock {
     pub key: [i32; 3],
     pub cells: Box<[u32; BLOCK_CELLS]>,
     pub slots: Vec<u32>,
+    /// Its entry in the cloud's [`SuperGrid`].
+    pub handle: Option<SuperHandle>,
 }
 
 /// The fused cloud: one point per occupied fine voxel.
@@ -33,6 +37,8 @@ pub struct FusedCloud {
     pub block: Vec<u32>,
     /// Step at which each slot last changed (see [`FusedCloud::changed_at`]).
     pub stamp: Vec<u32>,
+    /// The occupied blocks by superblock (far nearest searches).
+    pub supergrid: SuperGrid,
     epoch: u32,
     acc: Vec<[f64; 3]>,
     cnt: Vec<u32>,
@@ -54,6 +60,7 @@ impl FusedCloud {
     pub fn new(domain: Domain) -> FusedCloud {
         let n = domain.num_blocks();
         FusedCloud {
+            supergrid: SuperGrid::new(&domain),
             domain,
             table: vec![NONE; n],
             blocks: Vec::new(),
@@ -124,10 +131,12 @@ impl FusedCloud {
             };
             if self.table[b] == NONE {
                 self.table[b] = self.blocks.len() as u32;
+                let handle = self.supergrid.add_block(self.domain.block_key(b));
                 self.blocks.push(FusedBlock {
                     key: self.domain.block_key(b),
                     cells: Box::new([NONE; BLOCK_CELLS]),
                     slots: Vec::new(),
+                    handle,
                 });
             }
             let blk = &mut self.blocks[self.table[b] as usize];
@@ -171,6 +180,10 @@ impl FusedCloud {
                 let q = self.pos[si];
                 [(q[0] + a[0]) / (n + 1.0), (q[1] + a[1]) / (n + 1.0), (q[2] + a[2]) / (n + 1.0)]
             };
+            let t = self.table[self.block[si] as usize];
+            if let Some(h) = self.blocks[t as usize].handle {
+                self.supergrid.grow(h, self.pos[si]);
+            }
         }
         delta
     }
@@ -199,8 +212,8 @@ impl Bucketed for FusedCloud {
             }
         }
     }
-    fn block_keys(&self) -> Vec<[i32; 3]> {
-        self.blocks.iter().map(|b| b.key).collect()
+    fn supergrid(&self) -> &SuperGrid {
+        &self.supergrid
     }
 }
 

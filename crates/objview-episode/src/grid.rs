@@ -120,14 +120,119 @@ pub trait Bucketed {
     /// Calls `f(index, position)` for every point in the block with block key `b`, if the block
     /// holds points.
     fn for_block<F: FnMut(u32, [f64; 3])>(&self, b: [i32; 3], f: F);
-    /// The block keys of every block holding points.
-    fn block_keys(&self) -> Vec<[i32; 3]>;
+    /// The occupied blocks grouped by superblock (for searches that reach far).
+    fn supergrid(&self) -> &SuperGrid;
 }
 
-/// The nearest point of `set` to `p` with squared distance below `bound2` (exact; ties → the
-/// smaller index): `(d², index)`, or `(bound2, NONE)` when there is none. The 27 fine voxels
-/// around p first (anything outside them is ≥ h away), then rings of blocks (after ring r
-/// everything unseen is ≥ r·e away), then every block, pruned by its box.
+/// Blocks per superblock edge, as a shift (4 = 1 << 2): a superblock is 32 fine voxels wide.
+pub const SUPER_SHIFT: i32 = 2;
+
+/// The occupied blocks of a point set grouped by superblock (4×4×4 blocks): the coarse level
+/// that keeps a nearest search cheap when the answer is far (a point deep inside an object
+/// whose nearest fused point is on the observed outside), where rings of blocks would visit
+/// thousands of empty blocks.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SuperGrid {
+    lo: [i32; 3],
+    dims: [i32; 3],
+    /// Per superblock (x fastest): its occupied blocks with the boxes of their points.
+    lists: Vec<Vec<([i32; 3], Aabb)>>,
+}
+
+/// An axis-aligned box around a set of points (empty: lo = +∞, hi = −∞).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Aabb {
+    pub lo: [f64; 3],
+    pub hi: [f64; 3],
+}
+
+impl Aabb {
+    /// The empty box.
+    pub const EMPTY: Aabb = Aabb { lo: [f64::INFINITY; 3], hi: [f64::NEG_INFINITY; 3] };
+
+    /// Grows the box to contain `p`.
+    #[inline]
+    pub fn grow(&mut self, p: [f64; 3]) {
+        for a in 0..3 {
+            self.lo[a] = self.lo[a].min(p[a]);
+            self.hi[a] = self.hi[a].max(p[a]);
+        }
+    }
+
+    /// Squared distance from `p` to the box (0 inside; ∞ for the empty box).
+    #[inline]
+    pub fn dist2(&self, p: [f64; 3]) -> f64 {
+        if self.lo[0] > self.hi[0] {
+            return f64::INFINITY;
+        }
+        let mut d2 = 0.0;
+        for a in 0..3 {
+            let d = (self.lo[a] - p[a]).max(p[a] - self.hi[a]).max(0.0);
+            d2 += d * d;
+        }
+        d2
+    }
+}
+
+/// Where a block's entry lives in a [`SuperGrid`] (for [`SuperGrid::grow`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SuperHandle(u32, u32);
+
+impl SuperGrid {
+    /// An empty grid over `domain`.
+    pub fn new(domain: &Domain) -> SuperGrid {
+        let mut lo = [0; 3];
+        let mut dims = [0; 3];
+        for a in 0..3 {
+            lo[a] = domain.lo[a] >> SUPER_SHIFT;
+            dims[a] = ((domain.lo[a] + domain.dims[a] - 1) >> SUPER_SHIFT) - lo[a] + 1;
+        }
+        SuperGrid { lo, dims, lists: vec![Vec::new(); (dims[0] * dims[1] * dims[2]) as usize] }
+    }
+
+    /// Records an occupied block with an empty box (call once per block, when it first holds
+    /// a point; then [`SuperGrid::grow`] its box with every position its points take). `None`
+    /// outside the grid.
+    pub fn add_block(&mut self, b: [i32; 3]) -> Option<SuperHandle> {
+        let s = [b[0] >> SUPER_SHIFT, b[1] >> SUPER_SHIFT, b[2] >> SUPER_SHIFT];
+        let i = self.index(s)?;
+        self.lists[i].push((b, Aabb::EMPTY));
+        Some(SuperHandle(i as u32, (self.lists[i].len() - 1) as u32))
+    }
+
+    /// Grows the box of a block's points to contain `p`. A box never shrinks, so it stays a
+    /// valid bound while points move inside their voxels.
+    #[inline]
+    pub fn grow(&mut self, h: SuperHandle, p: [f64; 3]) {
+        self.lists[h.0 as usize][h.1 as usize].1.grow(p);
+    }
+
+    fn index(&self, s: [i32; 3]) -> Option<usize> {
+        let x = s[0] - self.lo[0];
+        let y = s[1] - self.lo[1];
+        let z = s[2] - self.lo[2];
+        if x < 0 || y < 0 || z < 0 || x >= self.dims[0] || y >= self.dims[1] || z >= self.dims[2] {
+            return None;
+        }
+        Some((x + self.dims[0] * (y + self.dims[1] * z)) as usize)
+    }
+
+    /// The occupied blocks of superblock key `s` with their boxes (empty outside the grid).
+    fn blocks(&self, s: [i32; 3]) -> &[([i32; 3], Aabb)] {
+        self.index(s).map_or(&[], |i| &self.lists[i])
+    }
+
+    /// Largest Chebyshev ring (in superblocks) around `s` that still meets the grid.
+    fn max_ring(&self, s: [i32; 3]) -> i32 {
+        (0..3).map(|a| (s[a] - self.lo[a]).max(self.lo[a] + self.dims[a] - 1 - s[a])).max().unwrap_or(0)
+    }
+}
+
+/// The nearest point of `set` to `p` with squared distance below `bound2` (exact; ties →
+/// the smaller index): `(d², index)`, or `(bound2, NONE)` when there is none. The 27 fine voxels
+/// around p first (anything outside them is ≥ h away), then rings of superblocks (after ring R
+/// everything unseen is ≥ R·E away, E the superblock edge), visiting the occupied blocks of each
+/// superblock that could hold something closer, pruned by their boxes.
 pub fn nearest_in<S: Bucketed>(set: &S, p: [f64; 3], bound2: f64) -> (f64, u32) {
     let mut best = (bound2, NONE);
     let consider = |best: &mut (f64, u32), i: u32, q: [f64; 3]| {
@@ -149,28 +254,45 @@ pub fn nearest_in<S: Bucketed>(set: &S, p: [f64; 3], bound2: f64) -> (f64, u32) 
     if best.0 <= h * h {
         return best;
     }
-    let e = h * BLOCK as f64;
+    let grid = set.supergrid();
+    let e_super = h * (BLOCK << SUPER_SHIFT) as f64;
     let bk = block_of(k);
-    let max_ring = 4;
-    for r in 0..=max_ring {
-        if r > 0 && ((r - 1) as f64 * e).powi(2) >= best.0 {
-            return best;
+    let sk = [bk[0] >> SUPER_SHIFT, bk[1] >> SUPER_SHIFT, bk[2] >> SUPER_SHIFT];
+    for r in 0..=grid.max_ring(sk) {
+        if r > 0 && ((r - 1) as f64 * e_super).powi(2) >= best.0 {
+            break;
         }
-        for_each_ring_block(bk, r, |b| {
-            if domain.block_dist2(p, b) < best.0 {
-                set.for_block(b, |i, q| consider(&mut best, i, q));
+        for_each_ring_block(sk, r, |s| {
+            if super_box_dist2(domain, p, s) >= best.0 {
+                return;
+            }
+            for (b, aabb) in grid.blocks(s) {
+                if aabb.dist2(p) < best.0 {
+                    set.for_block(*b, |i, q| consider(&mut best, i, q));
+                }
             }
         });
     }
-    if (max_ring as f64 * e).powi(2) >= best.0 {
-        return best;
-    }
-    for b in set.block_keys() {
-        if domain.block_dist2(p, b) < best.0 {
-            set.for_block(b, |i, q| consider(&mut best, i, q));
-        }
-    }
     best
+}
+
+/// Squared distance from `p` to the box of superblock key `s` (0 inside).
+fn super_box_dist2(d: &Domain, p: [f64; 3], s: [i32; 3]) -> f64 {
+    let e = d.h * (BLOCK << SUPER_SHIFT) as f64;
+    let mut d2 = 0.0;
+    for a in 0..3 {
+        let lo = s[a] as f64 * e;
+        let hi = lo + e;
+        let g = if p[a] < lo {
+            lo - p[a]
+        } else if p[a] > hi {
+            p[a] - hi
+        } else {
+            0.0
+        };
+        d2 += g * g;
+    }
+    d2
 }
 
 /// Calls `f` for every block key at Chebyshev distance exactly `r` from `c`.
@@ -214,6 +336,28 @@ mod tests {
         // Box distance: block [0,0.04)³.
         assert!((d.block_dist2([0.05, 0.02, 0.02], [0, 0, 0]) - 1e-4).abs() < 1e-15);
         assert_eq!(d.block_dist2([0.01, 0.02, 0.03], [0, 0, 0]), 0.0);
+    }
+
+    #[test]
+    fn boxes_bound_their_points() {
+        let mut b = Aabb::EMPTY;
+        assert_eq!(b.dist2([0.0; 3]), f64::INFINITY);
+        b.grow([0.0, 0.0, 0.0]);
+        b.grow([1.0, 0.5, 0.0]);
+        assert_eq!(b.dist2([0.5, 0.25, 0.0]), 0.0);
+        assert!((b.dist2([2.0, 0.5, -1.0]) - 2.0).abs() < 1e-15);
+        // Superblocks: blocks 0 and 3 share superblock 0, block 4 starts superblock 1.
+        let d = Domain::covering(0.005, [-1.0; 3], [1.0; 3], 0.05);
+        let mut g = SuperGrid::new(&d);
+        let h0 = g.add_block([0, 0, 0]).unwrap();
+        g.add_block([3, 0, 0]).unwrap();
+        g.add_block([4, 0, 0]).unwrap();
+        assert!(g.add_block([1000, 0, 0]).is_none());
+        g.grow(h0, [0.01, 0.01, 0.01]);
+        let keys: Vec<_> = g.blocks([0, 0, 0]).iter().map(|e| e.0).collect();
+        assert_eq!(keys, vec![[0, 0, 0], [3, 0, 0]]);
+        assert_eq!(g.blocks([0, 0, 0])[0].1.dist2([0.01, 0.01, 0.01]), 0.0);
+        assert_eq!(g.blocks([1, 0, 0]).len(), 1);
     }
 
     #[test]

@@ -20,6 +20,7 @@ use crate::fusion::FusedCloud;
 use crate::grid::{
     block_of, dist2, local_index, nearest_in, Aabb, Bucketed, Domain, SuperGrid, BLOCK, BLOCK_CELLS, NONE,
 };
+use rayon::prelude::*;
 
 /// A fixed point set with its nearest-fused distances.
 #[derive(Debug, Clone)]
@@ -294,132 +295,46 @@ impl Targets {
             slot_min[ci] = own;
         }
         // Far targets: minimum with the changed slots, or a full search if their slot moved.
+        // Both are pure per-target computations (run in parallel on the current rayon pool,
+        // which helps a lone long episode), applied afterwards in target order.
         let far = std::mem::take(&mut self.far);
         if !far.is_empty() && !changed.is_empty() {
             let groups = ChangedBlocks::new(fused, changed);
-            let mut cand: Vec<(f64, usize)> = Vec::new();
+            // Far targets are sorted by block: one group per target block.
+            let mut spans = Vec::new();
             let mut start = 0;
             while start < far.len() {
-                // Far targets are sorted by block: handle one target block at a time.
                 let tb = self.block_of_point(far[start] as usize);
-                let mut end = start;
-                let mut max_d2: f64 = 0.0;
+                let mut end = start + 1;
                 while end < far.len() && self.block_of_point(far[end] as usize) == tb {
-                    let iu = far[end] as usize;
-                    let bound = if self.mark[iu] == self.epoch {
-                        // Nearest slot moved: its new position bounds the answer.
-                        self.moved_bound(fused, iu)
-                    } else {
-                        self.d2[iu].min(self.cap2)
-                    };
-                    max_d2 = max_d2.max(bound);
                     end += 1;
                 }
-                if max_d2 > 0.0 {
-                    cand.clear();
-                    groups.candidates(&self.domain, tb, max_d2, &mut cand);
-                    if cand.is_empty() {
-                        // No changed slot is close enough to improve any target of this block.
-                        start = end;
-                        continue;
-                    }
-                    cand.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-                    for &i in &far[start..end] {
-                        let iu = i as usize;
-                        let p = self.pts[iu];
-                        let moved = self.mark[iu] == self.epoch;
-                        let mut best = if moved {
-                            let b = self.moved_bound(fused, iu);
-                            (b, if b < self.cap2 { self.nn[iu] } else { NONE })
-                        } else {
-                            (self.d2[iu].min(self.cap2), self.nn[iu])
-                        };
-                        if !moved && best.0 <= 4.0 * h2 {
-                            // Close: the changed slots within √d² lie in the fine voxels
-                            // within ⌈√d²/h⌉ ≤ 2 of p's.
-                            let k = self.domain.key(p);
-                            let r = (best.0.sqrt() / self.domain.h).ceil() as i32;
-                            for dz in -r..=r {
-                                for dy in -r..=r {
-                                    for dx in -r..=r {
-                                        let s = fused.slot_at([k[0] + dx, k[1] + dy, k[2] + dz]);
-                                        if s != NONE && fused.changed_now(s) {
-                                            let d = dist2(p, fused.pos[s as usize]);
-                                            if d < best.0 {
-                                                best = (d, s);
-                                            }
-                                        }
-                                    }
-                                }
-                            }
-                            if best.0 < self.d2[iu] && best.0 < self.cap2 {
-                                self.d2[iu] = best.0;
-                                self.nn[iu] = best.1;
-                            }
-                            continue;
-                        }
-                        for &(lb, gi) in &cand {
-                            if lb >= best.0 {
-                                break;
-                            }
-                            let g = &groups.blocks[gi];
-                            if g.aabb.dist2(p) >= best.0 {
-                                continue;
-                            }
-                            for &s in &groups.slots[g.range.0..g.range.1] {
-                                let d = dist2(p, fused.pos[s as usize]);
-                                if d < best.0 {
-                                    best = (d, s);
-                                }
-                            }
-                        }
-                        if moved {
-                            // Every unchanged slot is at least as far as the stored distance
-                            // (the minimum before this step, or a changed slot's distance the
-                            // push found): if a changed slot is that close, it is the answer
-                            // and no search is needed.
-                            if best.0 <= self.d2[iu] && best.1 != NONE {
-                                self.d2[iu] = best.0;
-                                self.nn[iu] = best.1;
-                                self.mark[iu] = 0;
-                            }
-                        } else if best.0 < self.d2[iu] && best.0 < self.cap2 {
-                            self.d2[iu] = best.0;
-                            self.nn[iu] = best.1;
-                        }
-                    }
-                }
+                spans.push((start, end, tb));
                 start = end;
             }
-        }
-        for &i in &recompute {
-            let iu = i as usize;
-            if self.mark[iu] != self.epoch {
-                continue; // resolved by the far pass
-            }
-            let p = self.pts[iu];
-            // The current position of its (moved) nearest slot bounds the answer from above,
-            // which keeps the search local.
-            let (ub, ub_slot) = match self.nn[iu] {
-                NONE => (self.cap2, NONE),
-                n => {
-                    let d = dist2(p, fused.pos[n as usize]);
-                    if d < self.cap2 {
-                        (d, n)
-                    } else {
-                        (self.cap2, NONE)
-                    }
+            let this = &*self;
+            let updates: Vec<Vec<FarUpdate>> = spans
+                .par_iter()
+                .with_min_len(8)
+                .map(|&(s, e, tb)| this.far_block(fused, &groups, &far[s..e], tb))
+                .collect();
+            for u in updates.iter().flatten() {
+                let iu = u.target as usize;
+                self.d2[iu] = u.d2;
+                self.nn[iu] = u.nn;
+                if u.resolved {
+                    self.mark[iu] = 0;
                 }
-            };
-            let (d, s) = fused.nearest(p, ub);
-            let (d, s) = if s == NONE { (ub, ub_slot) } else { (d, s) };
-            if s == NONE {
-                self.d2[iu] = f64::INFINITY;
-                self.nn[iu] = NONE;
-            } else {
-                self.d2[iu] = d;
-                self.nn[iu] = s;
             }
+        }
+        let todo: Vec<u32> =
+            recompute.iter().copied().filter(|&i| self.mark[i as usize] == self.epoch).collect();
+        let this = &*self;
+        let found: Vec<(f64, u32)> =
+            todo.par_iter().with_min_len(64).map(|&i| this.search_moved(fused, i as usize)).collect();
+        for (&i, &(d, s)) in todo.iter().zip(&found) {
+            self.d2[i as usize] = d;
+            self.nn[i as usize] = s;
         }
         // The next far list: previous far targets and recomputed ones still farther than h.
         let mut next: Vec<u32> =
@@ -445,10 +360,133 @@ impl Targets {
         }
     }
 
+    /// The far targets `idx` of target block `tb` against the changed slots: the updates of
+    /// those whose distance changed (`resolved`: a target whose nearest slot moved and whose
+    /// answer is now known without a search).
+    fn far_block(
+        &self,
+        fused: &FusedCloud,
+        groups: &ChangedBlocks,
+        idx: &[u32],
+        tb: [i32; 3],
+    ) -> Vec<FarUpdate> {
+        let h2 = self.domain.h * self.domain.h;
+        let mut out = Vec::new();
+        let mut max_d2: f64 = 0.0;
+        for &i in idx {
+            let iu = i as usize;
+            let bound = if self.mark[iu] == self.epoch {
+                // Nearest slot moved: its new position bounds the answer.
+                self.moved_bound(fused, iu)
+            } else {
+                self.d2[iu].min(self.cap2)
+            };
+            max_d2 = max_d2.max(bound);
+        }
+        if max_d2 <= 0.0 {
+            return out;
+        }
+        let mut cand: Vec<(f64, usize)> = Vec::new();
+        groups.candidates(&self.domain, tb, max_d2, &mut cand);
+        if cand.is_empty() {
+            // No changed slot is close enough to improve any target of this block.
+            return out;
+        }
+        cand.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        for &i in idx {
+            let iu = i as usize;
+            let p = self.pts[iu];
+            let moved = self.mark[iu] == self.epoch;
+            let mut best = if moved {
+                let b = self.moved_bound(fused, iu);
+                (b, if b < self.cap2 { self.nn[iu] } else { NONE })
+            } else {
+                (self.d2[iu].min(self.cap2), self.nn[iu])
+            };
+            if !moved && best.0 <= 4.0 * h2 {
+                // Close: the changed slots within √d² lie in the fine voxels within
+                // ⌈√d²/h⌉ ≤ 2 of p's.
+                let k = self.domain.key(p);
+                let r = (best.0.sqrt() / self.domain.h).ceil() as i32;
+                for dz in -r..=r {
+                    for dy in -r..=r {
+                        for dx in -r..=r {
+                            let s = fused.slot_at([k[0] + dx, k[1] + dy, k[2] + dz]);
+                            if s != NONE && fused.changed_now(s) {
+                                let d = dist2(p, fused.pos[s as usize]);
+                                if d < best.0 {
+                                    best = (d, s);
+                                }
+                            }
+                        }
+                    }
+                }
+            } else {
+                for &(lb, gi) in &cand {
+                    if lb >= best.0 {
+                        break;
+                    }
+                    let g = &groups.blocks[gi];
+                    if g.aabb.dist2(p) >= best.0 {
+                        continue;
+                    }
+                    let (d, j) = groups.nearest_in_group(g, p);
+                    if d < best.0 {
+                        best = (d, groups.slots[j]);
+                    }
+                }
+            }
+            if moved {
+                // Every unchanged slot is at least as far as the stored distance (the minimum
+                // before this step, or a changed slot's distance the push found): if a changed
+                // slot is that close, it is the answer and no search is needed.
+                if best.0 <= self.d2[iu] && best.1 != NONE {
+                    out.push(FarUpdate { target: i, d2: best.0, nn: best.1, resolved: true });
+                }
+            } else if best.0 < self.d2[iu] && best.0 < self.cap2 {
+                out.push(FarUpdate { target: i, d2: best.0, nn: best.1, resolved: false });
+            }
+        }
+        out
+    }
+
+    /// A full nearest search for target `i`, whose nearest slot moved away: `(d², slot)`, or
+    /// `(∞, NONE)` when nothing is within the cap. The moved slot's new position bounds the
+    /// answer from above, which keeps the search local.
+    fn search_moved(&self, fused: &FusedCloud, i: usize) -> (f64, u32) {
+        let p = self.pts[i];
+        let (ub, ub_slot) = match self.nn[i] {
+            NONE => (self.cap2, NONE),
+            n => {
+                let d = dist2(p, fused.pos[n as usize]);
+                if d < self.cap2 {
+                    (d, n)
+                } else {
+                    (self.cap2, NONE)
+                }
+            }
+        };
+        let (d, s) = fused.nearest(p, ub);
+        let (d, s) = if s == NONE { (ub, ub_slot) } else { (d, s) };
+        if s == NONE {
+            (f64::INFINITY, NONE)
+        } else {
+            (d, s)
+        }
+    }
+
     /// Target-block index of point `i` (points are sorted by block).
     fn block_of_point(&self, i: usize) -> [i32; 3] {
         block_of(self.domain.key(self.pts[i]))
     }
+}
+
+/// A far target's new distance (see [`Targets::far_block`]).
+struct FarUpdate {
+    target: u32,
+    d2: f64,
+    nn: u32,
+    resolved: bool,
 }
 
 /// Squared distance between the boxes of two blocks (0 when they touch or overlap).
@@ -462,10 +500,16 @@ fn block_box_dist2(d: &Domain, a: [i32; 3], b: [i32; 3]) -> f64 {
     s
 }
 
+/// Lanes of the vectorized nearest scan.
+const LANES: usize = 4;
+
 /// The changed slots of one step grouped by block.
 struct ChangedBlocks {
     blocks: Vec<ChangedBlock>,
+    /// Slots by group, each group padded with NONE to whole lanes.
     slots: Vec<u32>,
+    /// Their positions by coordinate (padding at +∞).
+    xyz: [Vec<f64>; 3],
     /// Domain block index → index into `blocks`, or NONE.
     lookup: Vec<u32>,
 }
@@ -482,16 +526,30 @@ impl ChangedBlocks {
         let mut v: Vec<(u32, u32)> = changed.iter().map(|&s| (fused.block[s as usize], s)).collect();
         v.sort_unstable();
         let mut blocks = Vec::new();
-        let mut slots = Vec::with_capacity(v.len());
+        let cap = v.len() + 3 * v.len().min(fused.domain.num_blocks());
+        let mut slots = Vec::with_capacity(cap);
+        let mut xyz: [Vec<f64>; 3] =
+            [Vec::with_capacity(cap), Vec::with_capacity(cap), Vec::with_capacity(cap)];
         let mut i = 0;
         while i < v.len() {
             let b = v[i].0;
             let start = slots.len();
             let mut aabb = Aabb::EMPTY;
             while i < v.len() && v[i].0 == b {
+                let q = fused.pos[v[i].1 as usize];
                 slots.push(v[i].1);
-                aabb.grow(fused.pos[v[i].1 as usize]);
+                for (c, &x) in xyz.iter_mut().zip(&q) {
+                    c.push(x);
+                }
+                aabb.grow(q);
                 i += 1;
+            }
+            // Pad to whole lanes with points at infinity (never nearest).
+            while (slots.len() - start) % LANES != 0 {
+                slots.push(NONE);
+                for c in xyz.iter_mut() {
+                    c.push(f64::INFINITY);
+                }
             }
             blocks.push(ChangedBlock {
                 key: fused.domain.block_key(b as usize),
@@ -505,7 +563,38 @@ impl ChangedBlocks {
                 lookup[b] = gi as u32;
             }
         }
-        ChangedBlocks { blocks, slots, lookup }
+        ChangedBlocks { blocks, slots, xyz, lookup }
+    }
+
+    /// The nearest changed slot of group `g` to `p`: (d², position in `slots`). The positions
+    /// are stored by coordinate and padded to whole lanes so that this loop vectorizes; ties
+    /// go to the earlier slot of the lane.
+    #[inline]
+    fn nearest_in_group(&self, g: &ChangedBlock, p: [f64; 3]) -> (f64, usize) {
+        let (lo, hi) = g.range;
+        let (xs, ys, zs) = (&self.xyz[0][lo..hi], &self.xyz[1][lo..hi], &self.xyz[2][lo..hi]);
+        let mut m = [f64::INFINITY; LANES];
+        let mut at = [0usize; LANES];
+        for (c, ((x, y), z)) in
+            xs.chunks_exact(LANES).zip(ys.chunks_exact(LANES)).zip(zs.chunks_exact(LANES)).enumerate()
+        {
+            for l in 0..LANES {
+                let dx = x[l] - p[0];
+                let dy = y[l] - p[1];
+                let dz = z[l] - p[2];
+                let d = dx * dx + dy * dy + dz * dz;
+                let better = d < m[l];
+                m[l] = if better { d } else { m[l] };
+                at[l] = if better { c * LANES + l } else { at[l] };
+            }
+        }
+        let mut best = (f64::INFINITY, lo);
+        for l in 0..LANES {
+            if m[l] < best.0 || (m[l] == best.0 && lo + at[l] < best.1) {
+                best = (m[l], lo + at[l]);
+            }
+        }
+        best
     }
 
     /// Groups whose block box is closer than √max_d2 to target block `tb`, with that lower

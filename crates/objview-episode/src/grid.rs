@@ -153,9 +153,9 @@ impl Aabb {
     /// Grows the box to contain `p`.
     #[inline]
     pub fn grow(&mut self, p: [f64; 3]) {
-        for a in 0..3 {
-            self.lo[a] = self.lo[a].min(p[a]);
-            self.hi[a] = self.hi[a].max(p[a]);
+        for (a, &x) in p.iter().enumerate() {
+            self.lo[a] = self.lo[a].min(x);
+            self.hi[a] = self.hi[a].max(x);
         }
     }
 
@@ -166,8 +166,8 @@ impl Aabb {
             return f64::INFINITY;
         }
         let mut d2 = 0.0;
-        for a in 0..3 {
-            let d = (self.lo[a] - p[a]).max(p[a] - self.hi[a]).max(0.0);
+        for (a, &x) in p.iter().enumerate() {
+            let d = (self.lo[a] - x).max(x - self.hi[a]).max(0.0);
             d2 += d * d;
         }
         d2

@@ -123,7 +123,7 @@ pub fn bench_episode(a: EpisodeBenchArgs) -> Result<()> {
     let stage = |i: usize| stats(r.steps.iter().map(|s| s.stage_seconds[i]).collect()).0;
     let stages = [stage(0), stage(1), stage(2), stage(3)];
     println!(
-        "  by stage (medians): render {:.1} ms, fusion {:.1} ms, GT distances (SC, CD) {:.1} ms, reference distances (NSC) + MS {:.1} ms",
+        "  by stage (medians, one thread): render {:.1} ms, fusion {:.1} ms, nearest-fused distances of the GT (SC, CD) and the reference (NSC) {:.1} ms, coverage counts + MS {:.1} ms",
         1e3 * stages[0],
         1e3 * stages[1],
         1e3 * stages[2],
@@ -168,7 +168,7 @@ pub fn bench_episode(a: EpisodeBenchArgs) -> Result<()> {
             "engine_median_s": med,
             "engine_p90_s": p90,
             "engine_all_threads": {"threads": all, "median_s": med_all, "p90_s": p90_all},
-            "stage_median_s": {"render": stages[0], "fusion": stages[1], "gt": stages[2], "reference_ms": stages[3]},
+            "stage_median_s": {"render": stages[0], "fusion": stages[1], "distances": stages[2], "coverage_ms": stages[3]},
             "planners": planners,
         });
         crate::common::write_json(path, &v)?;

@@ -45,6 +45,12 @@ pub struct Targets {
     epoch: u32,
     /// Per target: bit j set once d² < τ_j² has held at some update (see [`Targets::coverage`]).
     ever: Vec<u8>,
+    /// Per τ_j: targets with bit j set.
+    ever_counts: Vec<usize>,
+    /// Targets whose distance was written since the last [`Targets::coverage`] (only they can
+    /// become covered), and the update at which each was last recorded there.
+    touched: Vec<u32>,
+    tstamp: Vec<u32>,
     /// Retire targets once covered at the smallest τ (coverage-only sets: NSC).
     retire: bool,
     /// Retired targets are skipped by every update.
@@ -118,6 +124,9 @@ impl Targets {
             mark: vec![0; n],
             epoch: 0,
             ever: vec![0; n],
+            ever_counts: Vec::new(),
+            touched: Vec::new(),
+            tstamp: vec![0; n],
             retire: false,
             retired: vec![false; n],
             live,
@@ -144,6 +153,11 @@ impl Targets {
         self.nn.iter_mut().for_each(|n| *n = NONE);
         self.far = (0..self.pts.len() as u32).collect();
         self.ever.iter_mut().for_each(|e| *e = 0);
+        self.ever_counts.clear();
+        self.touched.clear();
+        self.tstamp.iter_mut().for_each(|t| *t = 0);
+        self.epoch = 0;
+        self.mark.iter_mut().for_each(|m| *m = 0);
     }
 
     /// Number of target points.
@@ -182,30 +196,33 @@ impl Targets {
     /// the accumulated observations still cover them; sticky coverage never decreases within
     /// an episode. Call once per update, always with the same τ list.
     pub fn coverage(&mut self, taus: &[f64]) -> Vec<f64> {
-        let t2: Vec<f64> = taus.iter().map(|t| t * t).collect();
-        let mut counts = vec![0usize; taus.len()];
+        let t2: Vec<f64> = taus.iter().take(8).map(|t| t * t).collect();
+        if self.ever_counts.len() != t2.len() {
+            self.ever_counts = vec![0; t2.len()];
+        }
         // The smallest τ: covered there means covered at every τ.
         let jmin = (0..t2.len()).min_by(|&a, &b| t2[a].total_cmp(&t2[b])).unwrap_or(0);
-        for (i, (e, &d)) in self.ever.iter_mut().zip(&self.d2).enumerate() {
-            if !self.retired[i] {
-                for (j, &t) in t2.iter().enumerate().take(8) {
-                    if d < t {
-                        *e |= 1 << j;
-                    }
-                }
-                if self.retire && *e & (1 << jmin) != 0 {
-                    self.retired[i] = true;
-                    self.live[self.pt_block[i] as usize] -= 1;
+        // Only targets whose distance was written since the last call can gain a bit.
+        for i in std::mem::take(&mut self.touched) {
+            let i = i as usize;
+            if self.retired[i] {
+                continue;
+            }
+            let d = self.d2[i];
+            let e = &mut self.ever[i];
+            for (j, &t) in t2.iter().enumerate() {
+                if d < t && *e & (1 << j) == 0 {
+                    *e |= 1 << j;
+                    self.ever_counts[j] += 1;
                 }
             }
-            for (j, c) in counts.iter_mut().enumerate().take(8) {
-                if *e & (1 << j) != 0 {
-                    *c += 1;
-                }
+            if self.retire && *e & (1 << jmin) != 0 {
+                self.retired[i] = true;
+                self.live[self.pt_block[i] as usize] -= 1;
             }
         }
         let n = self.pts.len().max(1) as f64;
-        counts.into_iter().map(|c| c as f64 / n).collect()
+        self.ever_counts.iter().map(|&c| c as f64 / n).collect()
     }
 
     /// Whether each target has ever been within τ_j (bit j of [`Targets::coverage`]'s list).
@@ -280,6 +297,10 @@ impl Targets {
                             if self.nn[iu] == s {
                                 if d <= self.d2[iu] {
                                     self.d2[iu] = if d < self.cap2 { d } else { f64::INFINITY };
+                                    if self.tstamp[iu] != self.epoch {
+                                        self.tstamp[iu] = self.epoch;
+                                        self.touched.push(i);
+                                    }
                                 } else if self.mark[iu] != self.epoch {
                                     self.mark[iu] = self.epoch;
                                     recompute.push(i);
@@ -287,6 +308,10 @@ impl Targets {
                             } else if d < self.d2[iu] && d < self.cap2 {
                                 self.d2[iu] = d;
                                 self.nn[iu] = s;
+                                if self.tstamp[iu] != self.epoch {
+                                    self.tstamp[iu] = self.epoch;
+                                    self.touched.push(i);
+                                }
                             }
                         }
                     }
@@ -321,6 +346,10 @@ impl Targets {
             for u in updates.iter().flatten() {
                 let iu = u.target as usize;
                 self.d2[iu] = u.d2;
+                if self.tstamp[iu] != self.epoch {
+                    self.tstamp[iu] = self.epoch;
+                    self.touched.push(u.target);
+                }
                 self.nn[iu] = u.nn;
                 if u.resolved {
                     self.mark[iu] = 0;
@@ -334,6 +363,10 @@ impl Targets {
             todo.par_iter().with_min_len(64).map(|&i| this.search_moved(fused, i as usize)).collect();
         for (&i, &(d, s)) in todo.iter().zip(&found) {
             self.d2[i as usize] = d;
+            if self.tstamp[i as usize] != self.epoch {
+                self.tstamp[i as usize] = self.epoch;
+                self.touched.push(i);
+            }
             self.nn[i as usize] = s;
         }
         // The next far list: previous far targets and recomputed ones still farther than h.
@@ -682,6 +715,7 @@ mod tests {
             let mut fused = FusedCloud::new(domain.clone());
             let mut t = Targets::new(domain.clone(), &tp, cap).unwrap();
             assert_eq!(t.len(), tp.len());
+            let mut sticky = vec![[false; 3]; tp.len()];
             for step in 0..6 {
                 let obs = patch(&mut rng, 6000);
                 let delta = fused.insert(&obs);
@@ -695,6 +729,18 @@ mod tests {
                 for (i, (&a, &b)) in t.d2.iter().zip(&want).enumerate() {
                     assert!(a == b, "cap {cap} step {step} target {i}: {a} vs brute {b}");
                 }
+                // Sticky coverage, counted incrementally, against the brute-force history.
+                let taus = [0.01, 0.02, 0.03];
+                for (e, &d) in sticky.iter_mut().zip(&want) {
+                    for (j, &tau) in taus.iter().enumerate() {
+                        if d < tau * tau {
+                            e[j] = true;
+                        }
+                    }
+                }
+                let manual: Vec<f64> =
+                    (0..3).map(|j| sticky.iter().filter(|e| e[j]).count() as f64 / tp.len() as f64).collect();
+                assert_eq!(t.coverage(&taus), manual, "cap {cap} step {step}");
             }
         }
     }

@@ -334,9 +334,16 @@ impl Episode {
         let points = self.frame.observed_points();
         let delta = self.fused.insert(&points);
         let t_fuse = t0.elapsed().as_secs_f64();
-        let to_gt = self.gt.update(&self.fused, &delta.changed);
+        // The two point sets are independent: updated concurrently on the rayon pool (one
+        // after the other on a one-thread pool).
+        let (gt, reference, fused) = (&mut self.gt, &mut self.reference, &self.fused);
+        let (to_gt, ()) = rayon::join(
+            || gt.update(fused, &delta.changed),
+            || {
+                reference.update(fused, &delta.changed);
+            },
+        );
         let t_gt = t0.elapsed().as_secs_f64();
-        self.reference.update(&self.fused, &delta.changed);
         self.slot_gt_d2.resize(self.fused.len(), 0.0);
         for (&s, d) in delta.changed.iter().zip(to_gt) {
             self.slot_gt_d2[s as usize] = d;

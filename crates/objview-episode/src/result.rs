@@ -43,8 +43,9 @@ pub struct Step {
     pub planner_seconds: f64,
     /// Environment time for this view: render + fusion + metrics (seconds).
     pub engine_seconds: f64,
-    /// `engine_seconds` by stage: render, fusion, ground-truth distances (SC, CD), the rest
-    /// (reference distances for NSC, MS, bookkeeping).
+    /// `engine_seconds` by stage: render, fusion, nearest-fused distances of the ground truth
+    /// (SC, CD) and of the observable reference (NSC) — updated concurrently —, the rest
+    /// (coverage counts, MS, bookkeeping).
     pub stage_seconds: [f64; 4],
 }
 

@@ -764,6 +764,23 @@ mod tests {
     }
 
     #[test]
+    fn mark_within_equals_brute_force() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.05);
+        let tp = patch(&mut rng, 5000);
+        let t = Targets::new(domain, &tp, 0.01).unwrap();
+        let pts = patch(&mut rng, 800);
+        for tau in [0.004, 0.01, 0.023] {
+            let mut bits = vec![0u64; t.len().div_ceil(64)];
+            t.mark_within(&pts, tau, &mut bits);
+            for (i, &p) in t.points().iter().enumerate() {
+                let want = pts.iter().any(|&q| dist2(p, q) < tau * tau);
+                assert_eq!(bits[i / 64] >> (i % 64) & 1 == 1, want, "tau {tau} target {i}");
+            }
+        }
+    }
+
+    #[test]
     fn fractions_and_mean() {
         let domain = Domain::covering(0.005, [-1.0; 3], [1.0; 3], 0.05);
         let tp = vec![[0.0, 0.0, 0.0], [0.015, 0.0, 0.0], [0.5, 0.0, 0.0]];
@@ -786,6 +803,42 @@ impl Targets {
     /// Squared distance from `p` to the nearest target point (exact; ∞ when there are none).
     pub fn nearest_d2(&self, p: [f64; 3]) -> f64 {
         nearest_in(self, p, f64::INFINITY).0
+    }
+
+    /// Sets bit i of `bits` (targets in [`Targets::points`] order, 64 per word) for every
+    /// target strictly closer than `tau` to one of `points` — the coverage of one fused view
+    /// without distance bookkeeping (the oracle's per-candidate gains). Each point visits the
+    /// fine voxels within ⌈τ/h⌉ of its own, as runs along x that are contiguous in the sorted
+    /// targets.
+    pub fn mark_within(&self, points: &[[f64; 3]], tau: f64, bits: &mut [u64]) {
+        let t2 = tau * tau;
+        let r = (tau / self.domain.h).ceil() as i32;
+        for &q in points {
+            let k = self.domain.key(q);
+            for dz in -r..=r {
+                for dy in -r..=r {
+                    let mut dx = -r;
+                    while dx <= r {
+                        let kk = [k[0] + dx, k[1] + dy, k[2] + dz];
+                        let run_end = (dx + (BLOCK - 1 - (kk[0] & (BLOCK - 1)))).min(r);
+                        let first = dx;
+                        dx = run_end + 1;
+                        let Some(b) = self.domain.block_index(block_of(kk)) else { continue };
+                        let t = self.table[b];
+                        if t == NONE {
+                            continue;
+                        }
+                        let starts = &self.cell_start[t as usize];
+                        let li = local_index(kk);
+                        for i in starts[li]..starts[li + (run_end - first) as usize + 1] {
+                            if dist2(self.pts[i as usize], q) < t2 {
+                                bits[i as usize / 64] |= 1 << (i % 64);
+                            }
+                        }
+                    }
+                }
+            }
+        }
     }
 
     /// The index range of the targets in target block `t`.

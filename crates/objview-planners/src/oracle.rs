@@ -74,7 +74,7 @@ impl Planner for Oracle {
         self.feasible = env.feasible_mask(&self.candidates);
         self.taken = vec![false; self.candidates.len()];
         let domain = scene_domain(&oracle.mesh, &oracle.reference, self.voxel);
-        let mut targets = Targets::new(domain.clone(), &oracle.reference, self.tau)
+        let targets = Targets::new(domain.clone(), &oracle.reference, self.tau)
             .map_err(|e| PlannerError(format!("oracle: {e}")))?;
         let words = targets.len().div_ceil(64);
         let mut renderer = Renderer::new();
@@ -86,14 +86,8 @@ impl Planner for Oracle {
                 let mut frame = Frame::empty(cam);
                 renderer.render_into(&oracle.mesh, &cam, &mut frame);
                 let mut fused = FusedCloud::new(domain.clone());
-                let delta = fused.insert(&frame.observed_points());
-                targets.reset();
-                targets.update(&fused, &delta.changed);
-                for (j, &d) in targets.d2.iter().enumerate() {
-                    if d < self.tau * self.tau {
-                        bits[j / 64] |= 1 << (j % 64);
-                    }
-                }
+                fused.insert(&frame.observed_points());
+                targets.mark_within(&fused.pos, self.tau, &mut bits);
             }
             self.covers.push(bits);
         }

@@ -22,9 +22,10 @@ use crate::grid::{
 };
 use rayon::prelude::*;
 
-/// A fixed point set with its nearest-fused distances.
-#[derive(Debug, Clone)]
-pub struct Targets {
+/// The immutable spatial index of a target set, shared (behind an `Arc`) by every episode
+/// on the same scene: building it sorts every point, which is most of an episode's set-up.
+#[derive(Debug)]
+struct TargetIndex {
     domain: Domain,
     /// Points sorted by (block, fine voxel).
     pts: Vec<[f64; 3]>,
@@ -34,6 +35,15 @@ pub struct Targets {
     cell_start: Vec<[u32; BLOCK_CELLS + 1]>,
     /// The target blocks by superblock (far nearest searches).
     supergrid: SuperGrid,
+    /// Target block of each target.
+    pt_block: Vec<u32>,
+}
+
+/// A fixed point set with its nearest-fused distances. Cloning a fresh set (before its first
+/// update) is the cheap way to start another episode on the same points: the index is shared.
+#[derive(Debug, Clone)]
+pub struct Targets {
+    ix: std::sync::Arc<TargetIndex>,
     /// Nearest-fused d² (∞: none, or ≥ cap).
     pub d2: Vec<f64>,
     /// Nearest slot, or NONE.
@@ -57,8 +67,6 @@ pub struct Targets {
     retired: Vec<bool>,
     /// Per target block: targets not retired.
     live: Vec<u32>,
-    /// Target block of each target.
-    pt_block: Vec<u32>,
 }
 
 impl Targets {
@@ -112,11 +120,7 @@ impl Targets {
             pt_block[st[0] as usize..st[BLOCK_CELLS] as usize].iter_mut().for_each(|b| *b = t as u32);
         }
         Ok(Targets {
-            domain,
-            pts,
-            table,
-            cell_start,
-            supergrid,
+            ix: std::sync::Arc::new(TargetIndex { domain, pts, table, cell_start, supergrid, pt_block }),
             d2: vec![f64::INFINITY; n],
             nn: vec![NONE; n],
             far: (0..n as u32).collect(),
@@ -130,7 +134,6 @@ impl Targets {
             retire: false,
             retired: vec![false; n],
             live,
-            pt_block,
         })
     }
 
@@ -146,12 +149,12 @@ impl Targets {
     /// Forgets every distance (as before the first update).
     pub fn reset(&mut self) {
         self.retired.iter_mut().for_each(|r| *r = false);
-        for (t, st) in self.cell_start.iter().enumerate() {
+        for (t, st) in self.ix.cell_start.iter().enumerate() {
             self.live[t] = st[BLOCK_CELLS] - st[0];
         }
         self.d2.iter_mut().for_each(|d| *d = f64::INFINITY);
         self.nn.iter_mut().for_each(|n| *n = NONE);
-        self.far = (0..self.pts.len() as u32).collect();
+        self.far = (0..self.ix.pts.len() as u32).collect();
         self.ever.iter_mut().for_each(|e| *e = 0);
         self.ever_counts.clear();
         self.touched.clear();
@@ -162,17 +165,17 @@ impl Targets {
 
     /// Number of target points.
     pub fn len(&self) -> usize {
-        self.pts.len()
+        self.ix.pts.len()
     }
 
     /// Whether there are none.
     pub fn is_empty(&self) -> bool {
-        self.pts.is_empty()
+        self.ix.pts.is_empty()
     }
 
     /// The points (sorted by voxel; the order of [`Targets::d2`]).
     pub fn points(&self) -> &[[f64; 3]] {
-        &self.pts
+        &self.ix.pts
     }
 
     /// Number of targets with d² < τ² for each τ.
@@ -218,10 +221,10 @@ impl Targets {
             }
             if self.retire && *e & (1 << jmin) != 0 {
                 self.retired[i] = true;
-                self.live[self.pt_block[i] as usize] -= 1;
+                self.live[self.ix.pt_block[i] as usize] -= 1;
             }
         }
-        let n = self.pts.len().max(1) as f64;
+        let n = self.ix.pts.len().max(1) as f64;
         self.ever_counts.iter().map(|&c| c as f64 / n).collect()
     }
 
@@ -232,16 +235,16 @@ impl Targets {
 
     /// Instantaneous fraction of targets with d² < τ² for each τ.
     pub fn fractions(&self, taus: &[f64]) -> Vec<f64> {
-        let n = self.pts.len().max(1) as f64;
+        let n = self.ix.pts.len().max(1) as f64;
         self.counts(taus).into_iter().map(|c| c as f64 / n).collect()
     }
 
     /// Mean d² (the GT→fused half of CD); ∞ while no fused point exists.
     pub fn mean_d2(&self) -> f64 {
-        if self.pts.is_empty() {
+        if self.ix.pts.is_empty() {
             return 0.0;
         }
-        self.d2.iter().sum::<f64>() / self.pts.len() as f64
+        self.d2.iter().sum::<f64>() / self.ix.pts.len() as f64
     }
 
     /// Updates every distance after `fused` changed the slots `changed` (its latest insertion).
@@ -250,7 +253,7 @@ impl Targets {
     /// distance, which the push finds for free within h; a full search otherwise).
     pub fn update(&mut self, fused: &FusedCloud, changed: &[u32]) -> Vec<f64> {
         self.epoch += 1;
-        let h2 = self.domain.h * self.domain.h;
+        let h2 = self.ix.domain.h * self.ix.domain.h;
         let mut recompute: Vec<u32> = Vec::new();
         // Far targets whose nearest slot moved: full search (checked before the push, which
         // may point them at slots that changed now).
@@ -279,12 +282,12 @@ impl Targets {
                         let run_end = (dx + (BLOCK - 1 - (kk[0] & (BLOCK - 1)))).min(1);
                         let first = dx;
                         dx = run_end + 1;
-                        let Some(b) = self.domain.block_index(block_of(kk)) else { continue };
-                        let t = self.table[b];
+                        let Some(b) = self.ix.domain.block_index(block_of(kk)) else { continue };
+                        let t = self.ix.table[b];
                         if t == NONE || self.live[t as usize] == 0 {
                             continue;
                         }
-                        let starts = &self.cell_start[t as usize];
+                        let starts = &self.ix.cell_start[t as usize];
                         let li = local_index(kk);
                         let (lo, hi) = (starts[li], starts[li + (run_end - first) as usize + 1]);
                         for i in lo..hi {
@@ -292,7 +295,7 @@ impl Targets {
                             if self.retired[iu] {
                                 continue;
                             }
-                            let d = dist2(self.pts[iu], q);
+                            let d = dist2(self.ix.pts[iu], q);
                             own = own.min(d);
                             if self.nn[iu] == s {
                                 if d <= self.d2[iu] {
@@ -389,7 +392,7 @@ impl Targets {
     fn moved_bound(&self, fused: &FusedCloud, i: usize) -> f64 {
         match self.nn[i] {
             NONE => self.cap2,
-            n => dist2(self.pts[i], fused.pos[n as usize]).min(self.cap2),
+            n => dist2(self.ix.pts[i], fused.pos[n as usize]).min(self.cap2),
         }
     }
 
@@ -403,7 +406,7 @@ impl Targets {
         idx: &[u32],
         tb: [i32; 3],
     ) -> Vec<FarUpdate> {
-        let h2 = self.domain.h * self.domain.h;
+        let h2 = self.ix.domain.h * self.ix.domain.h;
         let mut out = Vec::new();
         let mut max_d2: f64 = 0.0;
         for &i in idx {
@@ -420,7 +423,7 @@ impl Targets {
             return out;
         }
         let mut cand: Vec<(f64, usize)> = Vec::new();
-        groups.candidates(&self.domain, tb, max_d2, &mut cand);
+        groups.candidates(&self.ix.domain, tb, max_d2, &mut cand);
         if cand.is_empty() {
             // No changed slot is close enough to improve any target of this block.
             return out;
@@ -428,7 +431,7 @@ impl Targets {
         cand.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         for &i in idx {
             let iu = i as usize;
-            let p = self.pts[iu];
+            let p = self.ix.pts[iu];
             let moved = self.mark[iu] == self.epoch;
             let mut best = if moved {
                 let b = self.moved_bound(fused, iu);
@@ -439,8 +442,8 @@ impl Targets {
             if !moved && best.0 <= 4.0 * h2 {
                 // Close: the changed slots within √d² lie in the fine voxels within
                 // ⌈√d²/h⌉ ≤ 2 of p's.
-                let k = self.domain.key(p);
-                let r = (best.0.sqrt() / self.domain.h).ceil() as i32;
+                let k = self.ix.domain.key(p);
+                let r = (best.0.sqrt() / self.ix.domain.h).ceil() as i32;
                 for dz in -r..=r {
                     for dy in -r..=r {
                         for dx in -r..=r {
@@ -487,7 +490,7 @@ impl Targets {
     /// `(∞, NONE)` when nothing is within the cap. The moved slot's new position bounds the
     /// answer from above, which keeps the search local.
     fn search_moved(&self, fused: &FusedCloud, i: usize) -> (f64, u32) {
-        let p = self.pts[i];
+        let p = self.ix.pts[i];
         let (ub, ub_slot) = match self.nn[i] {
             NONE => (self.cap2, NONE),
             n => {
@@ -510,7 +513,7 @@ impl Targets {
 
     /// Target-block index of point `i` (points are sorted by block).
     fn block_of_point(&self, i: usize) -> [i32; 3] {
-        block_of(self.domain.key(self.pts[i]))
+        block_of(self.ix.domain.key(self.ix.pts[i]))
     }
 }
 
@@ -812,9 +815,9 @@ impl Targets {
     /// targets.
     pub fn mark_within(&self, points: &[[f64; 3]], tau: f64, bits: &mut [u64]) {
         let t2 = tau * tau;
-        let r = (tau / self.domain.h).ceil() as i32;
+        let r = (tau / self.ix.domain.h).ceil() as i32;
         for &q in points {
-            let k = self.domain.key(q);
+            let k = self.ix.domain.key(q);
             for dz in -r..=r {
                 for dy in -r..=r {
                     let mut dx = -r;
@@ -823,15 +826,15 @@ impl Targets {
                         let run_end = (dx + (BLOCK - 1 - (kk[0] & (BLOCK - 1)))).min(r);
                         let first = dx;
                         dx = run_end + 1;
-                        let Some(b) = self.domain.block_index(block_of(kk)) else { continue };
-                        let t = self.table[b];
+                        let Some(b) = self.ix.domain.block_index(block_of(kk)) else { continue };
+                        let t = self.ix.table[b];
                         if t == NONE {
                             continue;
                         }
-                        let starts = &self.cell_start[t as usize];
+                        let starts = &self.ix.cell_start[t as usize];
                         let li = local_index(kk);
                         for i in starts[li]..starts[li + (run_end - first) as usize + 1] {
-                            if dist2(self.pts[i as usize], q) < t2 {
+                            if dist2(self.ix.pts[i as usize], q) < t2 {
                                 bits[i as usize / 64] |= 1 << (i % 64);
                             }
                         }
@@ -843,37 +846,37 @@ impl Targets {
 
     /// The index range of the targets in target block `t`.
     fn block_range(&self, t: u32) -> std::ops::Range<usize> {
-        let s = &self.cell_start[t as usize];
+        let s = &self.ix.cell_start[t as usize];
         s[0] as usize..s[BLOCK_CELLS] as usize
     }
 }
 
 impl Bucketed for Targets {
     fn domain(&self) -> &Domain {
-        &self.domain
+        &self.ix.domain
     }
     fn for_cell<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], mut f: F) {
-        let Some(b) = self.domain.block_index(block_of(k)) else { return };
-        let t = self.table[b];
+        let Some(b) = self.ix.domain.block_index(block_of(k)) else { return };
+        let t = self.ix.table[b];
         if t != NONE {
-            let s = &self.cell_start[t as usize];
+            let s = &self.ix.cell_start[t as usize];
             let li = local_index(k);
             for i in s[li]..s[li + 1] {
-                f(i, self.pts[i as usize]);
+                f(i, self.ix.pts[i as usize]);
             }
         }
     }
     fn for_block<F: FnMut(u32, [f64; 3])>(&self, b: [i32; 3], mut f: F) {
-        let Some(bi) = self.domain.block_index(b) else { return };
-        let t = self.table[bi];
+        let Some(bi) = self.ix.domain.block_index(b) else { return };
+        let t = self.ix.table[bi];
         if t != NONE {
             for i in self.block_range(t) {
-                f(i as u32, self.pts[i]);
+                f(i as u32, self.ix.pts[i]);
             }
         }
     }
     fn supergrid(&self) -> &SuperGrid {
-        &self.supergrid
+        &self.ix.supergrid
     }
 }
 

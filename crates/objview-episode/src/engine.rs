@@ -48,6 +48,29 @@ pub struct Scene {
     /// The metric grid domain (covers mesh, ground truth and reference).
     pub domain: Domain,
     pub intrinsics: Intrinsics,
+    /// Fresh (never updated) ground-truth and reference target sets for the reference cap
+    /// they were built with: every episode on the scene starts from a clone, sharing their
+    /// spatial indexes (see [`Scene::fresh_targets`]).
+    pub(crate) targets: std::sync::OnceLock<Arc<(f64, Targets, Targets)>>,
+}
+
+impl Scene {
+    /// Ground-truth targets (exact distances) and reference targets (distances capped at
+    /// `reference_cap`) with no distances yet, for a new episode. The indexes are built once
+    /// per scene (and cap) and shared.
+    pub fn fresh_targets(&self, reference_cap: f64) -> Result<(Targets, Targets), EpisodeError> {
+        if let Some(t) = self.targets.get() {
+            if t.0 == reference_cap {
+                return Ok((t.1.clone(), t.2.clone()));
+            }
+        }
+        let gt = Targets::new(self.domain.clone(), &self.gt, f64::INFINITY).map_err(EpisodeError::Setup)?;
+        let reference = Targets::new(self.domain.clone(), &self.reference.points, reference_cap)
+            .map_err(EpisodeError::Setup)?;
+        // The first cap asked for is kept (episodes use one τ list in practice).
+        let _ = self.targets.set(Arc::new((reference_cap, gt.clone(), reference.clone())));
+        Ok((gt, reference))
+    }
 }
 
 /// The grid domain for a mesh and its ground truth: their bounding box plus 0.1.
@@ -123,9 +146,7 @@ impl Episode {
         let started = Instant::now();
         settings.validate().map_err(EpisodeError::Settings)?;
         let max_tau = settings.taus.iter().cloned().fold(0.0, f64::max);
-        let gt = Targets::new(scene.domain.clone(), &scene.gt, f64::INFINITY).map_err(EpisodeError::Setup)?;
-        let reference = Targets::new(scene.domain.clone(), &scene.reference.points, max_tau)
-            .map_err(EpisodeError::Setup)?;
+        let (gt, reference) = scene.fresh_targets(max_tau)?;
         let h = settings.fusion_voxel;
         let ms = settings
             .ms_deltas
@@ -179,6 +200,12 @@ impl Episode {
             depth: Arc::new(self.frame.depth.clone()),
             rgb,
         }
+    }
+
+    /// The latest step's record (metrics after the latest view). Ground truth: not for
+    /// planners — the server shows it only for public splits.
+    pub fn last_step(&self) -> Option<&Step> {
+        self.steps.last()
     }
 
     /// Whether the episode has ended.

@@ -71,5 +71,6 @@ pub fn scene_from_parts(
         reference: Arc::new(reference),
         domain,
         intrinsics,
+        targets: std::sync::OnceLock::new(),
     })
 }

@@ -15,6 +15,12 @@ if ! ls /usr/lib/llvm-*/lib/libclang*.so* /usr/lib/*/libclang*.so* >/dev/null 2>
   need_pkgs+=(libclang-dev)
 fi
 
+# The Python client's tests (python/run_tests.sh) need python3 with venv and pip.
+command -v python3 >/dev/null 2>&1 || need_pkgs+=(python3)
+if command -v python3 >/dev/null 2>&1 && ! python3 -c "import venv, ensurepip" >/dev/null 2>&1; then
+  need_pkgs+=(python3-venv)
+fi
+
 if [ ${#need_pkgs[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
     echo "setup: installing ${need_pkgs[*]}" >&2

@@ -13,3 +13,6 @@ echo "== cargo clippy"
 cargo clippy --workspace --all-targets --locked --profile ci -- -D warnings
 echo "== cargo test"
 cargo test --workspace --locked --profile ci
+echo "== python client and Gymnasium env (pytest against a real objview serve)"
+# `cargo test` above built the binary the CLI tests use; the Python suite starts it as a server.
+OBJVIEW_BIN="${OBJVIEW_BIN:-${CARGO_TARGET_DIR:-target}/ci/objview}" bash python/run_tests.sh

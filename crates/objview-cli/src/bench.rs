@@ -26,6 +26,9 @@ pub enum Command {
     /// How much d_plan, d_sat and r_vis move when the sampled ground-truth cloud is re-drawn
     /// with other seeds, on the built-in pool.
     Stability(StabilityArgs),
+    /// The evaluation server under load: N concurrent clients playing episodes of random
+    /// feasible moves; throughput and p50/p99 step latency, client and server side.
+    Serve(crate::bench_serve::ServeBenchArgs),
 }
 
 #[derive(Parser)]
@@ -100,6 +103,7 @@ pub fn run(cmd: Command) -> Result<()> {
         Command::Annotate(a) => crate::bench_annotate::bench_annotate(a),
         Command::Stability(a) => crate::bench_annotate::bench_stability(a),
         Command::Episode(a) => crate::bench_episode::bench_episode(a),
+        Command::Serve(a) => crate::bench_serve::run(a),
     }
 }
 

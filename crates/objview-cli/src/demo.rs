@@ -239,6 +239,8 @@ fn demo_run(
         no_timings: false,
         retry_failed: false,
         quiet: true,
+        server: None,
+        token: None,
     };
     extra(&mut args);
     let file = args.out.clone();

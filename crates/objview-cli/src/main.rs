@@ -6,6 +6,7 @@ mod annotate;
 mod bench;
 mod bench_annotate;
 mod bench_episode;
+mod bench_serve;
 mod common;
 mod demo;
 mod feasibility;
@@ -18,6 +19,7 @@ mod provenance;
 mod render;
 mod report;
 mod run;
+mod serve;
 mod viewset;
 mod visibility;
 
@@ -56,6 +58,11 @@ enum Command {
     /// Online episodes (SPEC §5): one per object with a planner, view space and budget; one JSON
     /// line each; resumable.
     Run(run::Args),
+    /// The evaluation server (docs/server-api.md): online episodes over HTTP/JSON for remote
+    /// planners on hidden objects, persisted in SQLite.
+    Serve(serve::Args),
+    /// The finished results of a server's database as `objview run` JSON Lines.
+    Export(serve::ExportArgs),
     /// Tables 2–5 of the paper, full summaries and figures from episode results.
     Report(report::Args),
     /// The main job on the built-in objects: synthesize, render, annotate visibility, summarize.
@@ -88,6 +95,8 @@ fn main() {
         Command::Objects(c) => objects::run(c),
         Command::Bench(c) => bench::run(c),
         Command::Run(a) => run::run(a),
+        Command::Serve(a) => serve::run(a),
+        Command::Export(a) => serve::export(a),
         Command::Report(a) => report::run(a),
         Command::Demo(a) => demo::run(a),
     };

@@ -33,7 +33,9 @@ pub struct Args {
     /// Budget: a number K of planner views after the start view (5, 30, …) or `auto`.
     #[arg(long, default_value = "auto")]
     pub budget: String,
-    /// Objects: mesh files, folders (searched recursively) or split files (.json).
+    /// Objects: mesh files, folders (searched recursively) or split files (.json). With
+    /// --server: split ids of the server, each `SPLIT` (all its objects, in order) or
+    /// `SPLIT:ID,ID,…` (objects by uid or index); a split file's path stands for its stem.
     #[arg(long, required = true, num_args = 1..)]
     pub objects: Vec<PathBuf>,
     /// Results file (JSON Lines); an existing file of the same run is resumed.
@@ -83,6 +85,16 @@ pub struct Args {
     /// Do not print per-episode lines.
     #[arg(long)]
     pub quiet: bool,
+    /// Run the episodes on an evaluation server (`objview serve`) at this URL instead of a
+    /// local engine: the planner runs here and sees only what the API gives it; the result
+    /// lines are the server's (identical to a local run's, wall-clock times aside). The
+    /// object, its normalization, ground truth, reference cache, start pose, cap and
+    /// checkpoints are the server's.
+    #[arg(long, value_name = "URL")]
+    pub server: Option<String>,
+    /// Bearer token for --server (default: $OBJVIEW_TOKEN).
+    #[arg(long)]
+    pub token: Option<String>,
 }
 
 /// The default reference cache folder.
@@ -127,6 +139,9 @@ pub fn execute(a: &Args) -> Result<RunSummary> {
     if probe.execution_mode() == objview_episode::ExecutionMode::BudgetedPlan && budget == Budget::Auto {
         bail!("--planner {} is a budgeted plan: give a fixed --budget K (e.g. 5 or 30), not auto", a.planner);
     }
+    if let Some(url) = &a.server {
+        return execute_remote(a, url, t, budget, &params, probe.as_ref());
+    }
     let space = ViewSpace::resolve(&a.space).with_context(|| format!("--space {}", a.space))?;
     let space_name =
         if ViewSpace::builtin(&a.space).is_some() { a.space.clone() } else { space.name.clone() };
@@ -156,24 +171,182 @@ pub fn execute(a: &Args) -> Result<RunSummary> {
         anyhow::ensure!(dir.is_dir(), "{}: --gt-cloud-dir is not a folder", dir.display());
     }
     let objects = resolve_inputs(&a.objects)?;
+    let record = objview_server::spec::RunRecord {
+        planner: &a.planner,
+        planner_params: probe.params(),
+        view_space: &space_name,
+        space: &space,
+        budget,
+        seed: a.seed,
+        candidates: &a.candidates,
+        candidate_count: candidates.len(),
+        start_pose,
+        normalize: a.normalize,
+        settings: &settings,
+    }
+    .to_json();
+    check_same_run(&a.out, &record)?;
+    let work = |obj: &ObjectRef| -> Result<String> {
+        let gt = gt_cloud_path(obj, a.gt_cloud_dir.as_deref())?;
+        let src = SceneSource {
+            uid: &obj.uid,
+            mesh: &obj.mesh,
+            gt_cloud: gt.as_deref(),
+            normalization: a.normalize,
+        };
+        let scene = Arc::new(load_scene(&src, &space, &space_name, &settings, cache_dir.as_deref())?);
+        let mut planner =
+            objview_planners::registry::with_params(&a.planner, &params).map_err(anyhow::Error::msg)?;
+        let res = run_episode(
+            scene,
+            planner.as_mut(),
+            &settings,
+            budget,
+            a.seed,
+            start_pose,
+            candidates.clone(),
+            record.clone(),
+        )?;
+        Ok(to_line(&res))
+    };
+    let failure = |obj: &ObjectRef, e: &anyhow::Error| {
+        to_line(&json!({
+            "uid": obj.uid,
+            "mesh": obj.mesh.display().to_string(),
+            "error": crate::one_line(e),
+            "settings": record,
+        }))
+    };
+    batch(a, &objects, &space_name, budget, t, work, failure)
+}
+
+/// `run --server`: the same episodes against an evaluation server. Objects are `SPLIT` or
+/// `SPLIT:ID,ID,…` (uids or indices) of the server; settings that belong to the server are
+/// refused rather than silently ignored.
+fn execute_remote(
+    a: &Args,
+    url: &str,
+    t: Instant,
+    budget: Budget,
+    params: &[(String, serde_json::Value)],
+    probe: &dyn objview_episode::Planner,
+) -> Result<RunSummary> {
+    if probe.needs_ground_truth() {
+        bail!(
+            "--planner {} reads the ground truth: it cannot run against a server (run it locally)",
+            a.planner
+        );
+    }
+    let server_side = [
+        ("--start-pose", a.start_pose.is_some()),
+        ("--cap", a.cap != 129),
+        ("--checkpoints", a.checkpoints != [5, 10, 30, 50]),
+        ("--no-enough-info", a.no_enough_info),
+        ("--gt-cloud-dir", a.gt_cloud_dir.is_some()),
+        ("--cache-dir", a.cache_dir.is_some()),
+        ("--no-cache", a.no_cache),
+        ("--normalize", a.normalize != Normalization::Unit),
+    ];
+    if let Some((flag, _)) = server_side.iter().find(|(_, given)| *given) {
+        bail!("{flag} is a setting of the server (objview serve), not of run --server");
+    }
+    anyhow::ensure!(
+        ViewSpace::builtin(&a.space).is_some(),
+        "--space {}: a server offers the built-in view spaces only (whole, hemi, quarter, eighth)",
+        a.space
+    );
+    let token = a.token.clone().or_else(|| std::env::var("OBJVIEW_TOKEN").ok());
+    let client = objview_server::client::Client::new(url, token.as_deref());
+    client.health().with_context(|| format!("--server {url}"))?;
+    let mut objects: Vec<ObjectRef> = Vec::new();
+    for spec in &a.objects {
+        // A split file's path names the split of that id (its stem), as the server does.
+        let spec = if objview_dataset::inputs::is_split_file(spec) {
+            objview_server::pool::split_id(spec)?
+        } else {
+            spec.to_string_lossy().into_owned()
+        };
+        let (split, ids) = match spec.split_once(':') {
+            Some((s, ids)) => (s, Some(ids)),
+            None => (spec.as_str(), None),
+        };
+        let uids = client.split_objects(split).with_context(|| format!("--objects {spec}"))?;
+        let chosen: Vec<String> = match ids {
+            None => uids.clone(),
+            Some(ids) => ids
+                .split(',')
+                .filter(|x| !x.is_empty())
+                .map(|id| match id.parse::<usize>() {
+                    Ok(i) if !uids.contains(&id.to_string()) => uids.get(i).cloned().with_context(|| {
+                        format!("--objects {spec}: split {split} has {} objects, no index {i}", uids.len())
+                    }),
+                    _ => uids
+                        .contains(&id.to_string())
+                        .then(|| id.to_string())
+                        .with_context(|| format!("--objects {spec}: split {split} has no object {id:?}")),
+                })
+                .collect::<Result<_>>()?,
+        };
+        for uid in chosen {
+            anyhow::ensure!(!objects.iter().any(|o| o.uid == uid), "--objects: object {uid} is named twice");
+            objects.push(ObjectRef { uid, mesh: PathBuf::from(split), gt_cloud: None, annotation: None });
+        }
+    }
+    let candidates = Arc::new(
+        client
+            .candidate_set(&a.candidates)
+            .with_context(|| format!("--candidates {} on the server", a.candidates))?,
+    );
+    // What this side knows of the settings record (the server writes the full one).
     let record = crate::provenance::settings(
         "run",
         json!({
             "planner": a.planner,
             "planner_params": probe.params(),
-            "view_space": space_name,
-            "view_space_rules": format!("{space:?}"),
+            "view_space": a.space,
             "budget": budget.label(),
             "seed": a.seed,
             "candidates": a.candidates,
-            "candidate_count": candidates.len(),
-            "start_pose": start_pose.to_array(),
-            "normalize": format!("{:?}", a.normalize).to_lowercase(),
-            "episode": serde_json::to_value(&settings)?,
-            "intrinsics": {"width": 512, "height": 512, "fov_deg": 45.0},
+            "server": url,
         }),
     );
     check_same_run(&a.out, &record)?;
+    let work = |obj: &ObjectRef| -> Result<String> {
+        let mut planner =
+            objview_planners::registry::with_params(&a.planner, params).map_err(anyhow::Error::msg)?;
+        let ep = objview_server::client::RemoteEpisode {
+            split: obj.mesh.to_string_lossy().into_owned(),
+            object: obj.uid.clone(),
+            view_space: a.space.clone(),
+            budget,
+            candidate_set: a.candidates.clone(),
+            seed: a.seed,
+            record_timings: !a.no_timings,
+        };
+        Ok(objview_server::client::run_remote(&client, planner.as_mut(), &ep, candidates.clone())?)
+    };
+    let failure = |obj: &ObjectRef, e: &anyhow::Error| {
+        to_line(&json!({
+            "uid": obj.uid,
+            "split": obj.mesh.display().to_string(),
+            "error": crate::one_line(e),
+            "settings": record,
+        }))
+    };
+    batch(a, &objects, &a.space, budget, t, work, failure)
+}
+
+/// Runs `work` over `objects` into `a.out` (resumable, input order, `--threads` workers) with
+/// progress lines; `failure` makes the line of an object whose episode failed.
+fn batch(
+    a: &Args,
+    objects: &[ObjectRef],
+    space_name: &str,
+    budget: Budget,
+    t: Instant,
+    work: impl Fn(&ObjectRef) -> Result<String> + Sync,
+    failure: impl Fn(&ObjectRef, &anyhow::Error) -> String + Sync,
+) -> Result<RunSummary> {
     let (out, existing) = ResumableJsonl::open(&a.out, "uid", a.retry_failed)?;
     let todo = objects.iter().filter(|o| !existing.done.contains(&o.uid)).count();
     if !a.quiet {
@@ -193,42 +366,9 @@ pub fn execute(a: &Args) -> Result<RunSummary> {
     let bar = if a.quiet { indicatif::ProgressBar::hidden() } else { crate::demo::progress(todo as u64) };
     let terminal = std::io::stderr().is_terminal();
     let done = AtomicUsize::new(0);
-    let work = |obj: &ObjectRef| {
-        let r = (|| -> Result<String> {
-            let gt = gt_cloud_path(obj, a.gt_cloud_dir.as_deref())?;
-            let src = SceneSource {
-                uid: &obj.uid,
-                mesh: &obj.mesh,
-                gt_cloud: gt.as_deref(),
-                normalization: a.normalize,
-            };
-            let scene = Arc::new(load_scene(&src, &space, &space_name, &settings, cache_dir.as_deref())?);
-            let mut planner =
-                objview_planners::registry::with_params(&a.planner, &params).map_err(anyhow::Error::msg)?;
-            let res = run_episode(
-                scene,
-                planner.as_mut(),
-                &settings,
-                budget,
-                a.seed,
-                start_pose,
-                candidates.clone(),
-                record.clone(),
-            )?;
-            Ok(to_line(&res))
-        })();
-        match r {
-            Ok(line) => ItemOutcome { line, failed: false },
-            Err(e) => ItemOutcome {
-                line: to_line(&json!({
-                    "uid": obj.uid,
-                    "mesh": obj.mesh.display().to_string(),
-                    "error": crate::one_line(&e),
-                    "settings": record,
-                })),
-                failed: true,
-            },
-        }
+    let work = |obj: &ObjectRef| match work(obj) {
+        Ok(line) => ItemOutcome { line, failed: false },
+        Err(e) => ItemOutcome { line: failure(obj, &e), failed: true },
     };
     let progress = |obj: &ObjectRef, outcome: &ItemOutcome| {
         let i = done.fetch_add(1, Ordering::Relaxed) + 1;
@@ -258,7 +398,7 @@ pub fn execute(a: &Args) -> Result<RunSummary> {
             eprintln!("{msg}");
         }
     };
-    let summary = pool.install(|| run_batch(&objects, out, &existing, work, progress))?;
+    let summary = pool.install(|| run_batch(objects, out, &existing, work, progress))?;
     bar.finish_and_clear();
     Ok(RunSummary {
         done: summary.processed - summary.failed,
@@ -298,6 +438,10 @@ fn check_same_run(out: &Path, record: &serde_json::Value) -> Result<()> {
         ] {
             let mut a = old[key].clone();
             let mut b = record[key].clone();
+            if a.is_null() || b.is_null() {
+                // A remote run's lines and failure lines know only part of the record.
+                continue;
+            }
             if key == "episode" {
                 // Timings on/off do not change what an episode is.
                 for x in [&mut a, &mut b] {

@@ -118,7 +118,8 @@ pub struct EpisodeResult {
     /// Named checkpoints, as reached; always `terminal`.
     pub checkpoints: BTreeMap<String, Checkpoint>,
     pub reference: ReferenceInfo,
-    /// Ground-truth points (|GT|) and where they came from.
+    /// Ground-truth points (|GT|) and where they came from: `sampled(seed=…, count=…)` or
+    /// `file:NAME` (the cloud file's name, never its path).
     pub gt_points: usize,
     pub gt_source: String,
     /// Wall time of the episode (seconds), set-up included.

@@ -36,7 +36,13 @@ pub fn load_scene(
         load_normalized(src.mesh, src.normalization).map_err(|e| EpisodeError::Setup(e.to_string()))?;
     let gt = objview_geom::cloud::ground_truth(&mesh, &transform, src.gt_cloud)
         .map_err(|e| EpisodeError::Setup(e.to_string()))?;
-    scene_from_parts(src.uid, mesh, gt.points, gt.source, space, space_name, settings, cache_dir)
+    // Results name a ground-truth file by its name only: no paths of the machine that ran the
+    // episode (the server must not reveal them; local and remote results stay identical).
+    let source = match src.gt_cloud {
+        Some(p) => format!("file:{}", p.file_name().map_or_else(|| "?".into(), |n| n.to_string_lossy())),
+        None => gt.source,
+    };
+    scene_from_parts(src.uid, mesh, gt.points, source, space, space_name, settings, cache_dir)
 }
 
 /// A scene from an already normalized mesh and ground truth.

@@ -1,0 +1,104 @@
+//! `objview serve` (the evaluation server of docs/server-api.md) and `objview export` (its
+//! finished results as `objview run` JSON Lines). The server itself is `objview_server`.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::Parser;
+use objview_geom::normalize::Normalization;
+
+#[derive(Parser)]
+pub struct Args {
+    /// Split files (`objview pool split` output); each is a split whose id is the file stem.
+    #[arg(long, required = true, num_args = 1..)]
+    pub pool: Vec<PathBuf>,
+    /// Address to listen on (port 0: a free port, printed on start).
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub addr: String,
+    /// The database (SQLite, WAL): episodes, actions and results; reopened after a restart.
+    #[arg(long, default_value = "objview-server.sqlite")]
+    pub db: PathBuf,
+    /// Bearer tokens, one per line (`#` comments, an optional name after the token); without
+    /// it the server is open.
+    #[arg(long)]
+    pub tokens: Option<PathBuf>,
+    /// A split (id) whose running episodes show their metrics (repeatable).
+    #[arg(long)]
+    pub public: Vec<String>,
+    /// Seconds a client has for each action after an observation.
+    #[arg(long, default_value_t = 100.0)]
+    pub action_timeout: f64,
+    /// Seconds a client has for its first action after the create response.
+    #[arg(long, default_value_t = 300.0)]
+    pub start_timeout: f64,
+    /// Observable-reference cache folder (default: as `objview run`).
+    #[arg(long)]
+    pub cache_dir: Option<PathBuf>,
+    /// Do not cache observable references on disk.
+    #[arg(long)]
+    pub no_cache: bool,
+    /// `unit` (raw assets) or `none` (already normalized, checked), as `objview run`.
+    #[arg(long, default_value = "unit")]
+    pub normalize: Normalization,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    let cfg = objview_server::ServerConfig {
+        pool: a.pool,
+        public: a.public,
+        db: a.db.clone(),
+        tokens: a.tokens,
+        action_timeout_s: a.action_timeout,
+        start_timeout_s: a.start_timeout,
+        cache_dir: if a.no_cache {
+            None
+        } else {
+            Some(a.cache_dir.unwrap_or_else(crate::run::default_cache_dir))
+        },
+        normalize: a.normalize,
+    };
+    objview_server::run(&cfg, &a.addr, |addr, state| {
+        let splits: Vec<String> = state
+            .pool
+            .splits
+            .iter()
+            .map(|s| {
+                format!("{} ({} objects{})", s.id, s.objects.len(), if s.public { ", public" } else { "" })
+            })
+            .collect();
+        println!(
+            "objview serve: listening on http://{addr} | splits: {} | db {}",
+            splits.join(", "),
+            a.db.display()
+        );
+        let _ = std::io::stdout().flush();
+    })?;
+    Ok(())
+}
+
+#[derive(Parser)]
+pub struct ExportArgs {
+    /// The server's database.
+    #[arg(long)]
+    pub db: PathBuf,
+    /// Results file (JSON Lines, `objview run` format; `objview report` reads it).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Only this method's results.
+    #[arg(long)]
+    pub method: Option<String>,
+}
+
+pub fn export(a: ExportArgs) -> Result<()> {
+    let lines = objview_server::db::export(&a.db, a.method.as_deref())?;
+    crate::common::create_parent(&a.out)?;
+    let mut text = String::new();
+    for l in &lines {
+        text.push_str(l);
+        text.push('\n');
+    }
+    std::fs::write(&a.out, text).with_context(|| format!("writing {}", a.out.display()))?;
+    println!("export: {} results -> {}", lines.len(), a.out.display());
+    Ok(())
+}

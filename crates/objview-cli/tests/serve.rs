@@ -1,0 +1,250 @@
+//! End-to-end tests of `objview serve`, `objview export` and `objview run --server` with the
+//! real binary: a server killed with SIGKILL restarts on its database with its finished results
+//! intact and its running episodes ended as `interrupted` (views scored); the export feeds
+//! `objview report`; a remote run writes the file a local run writes.
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+use common::{objview_err, objview_ok, s, tempdir};
+use objview_geom::synth::{self, Detail};
+use objview_server::client::Client;
+use serde_json::{json, Value};
+
+/// A tiny pool: `hidden.json` with a coarse cube and octahedron and small ground-truth clouds.
+fn pool(dir: &Path) -> PathBuf {
+    for name in ["cube", "octahedron"] {
+        let mesh = synth::build(name, Detail { segments: 8 }).unwrap();
+        objview_geom::write::write_obj(&dir.join(format!("{name}.obj")), &mesh).unwrap();
+        let gt = objview_geom::cloud::sample_surface(&mesh, 1500, 0);
+        objview_geom::cloud::write_ply_points(&dir.join(format!("{name}.ply")), &gt).unwrap();
+    }
+    let entry = |n: &str| json!({"uid": n, "mesh": format!("{n}.obj"), "gt_cloud": format!("{n}.ply")});
+    let split = dir.join("hidden.json");
+    std::fs::write(&split, json!([entry("cube"), entry("octahedron")]).to_string()).unwrap();
+    split
+}
+
+/// A running `objview serve`, killed (SIGKILL) when dropped.
+struct Server {
+    child: Child,
+    url: String,
+}
+
+impl Server {
+    fn start(split: &Path, db: &Path, cache: &Path) -> Server {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_objview"))
+            .args([
+                "serve",
+                "--pool",
+                s(split),
+                "--addr",
+                "127.0.0.1:0",
+                "--db",
+                s(db),
+                "--cache-dir",
+                s(cache),
+            ])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("starting objview serve");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+        let url = line
+            .split_whitespace()
+            .find(|w| w.starts_with("http://"))
+            .unwrap_or_else(|| panic!("no URL in {line:?}"))
+            .to_string();
+        Server { child, url }
+    }
+
+    fn kill(&mut self) {
+        let _ = self.child.kill(); // SIGKILL on Unix
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+fn pose(d: [f64; 3]) -> Value {
+    let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    json!([3.0 * d[0] / n, 3.0 * d[1] / n, 3.0 * d[2] / n, 0.0, 0.0, 0.0, 0.0])
+}
+
+fn act(c: &Client, id: &str, step: usize, action: Value) -> Value {
+    c.post_json(&format!("/v1/episodes/{id}/actions"), &json!({"step": step, "action": action})).unwrap()
+}
+
+#[test]
+fn a_killed_server_keeps_its_results_and_ends_running_episodes_as_interrupted() {
+    let dir = tempdir();
+    let split = pool(dir.path());
+    let (db, cache) = (dir.path().join("server.sqlite"), dir.path().join("cache"));
+    let mut server = Server::start(&split, &db, &cache);
+    let c = Client::new(&server.url, None);
+    let body = |object: &str| {
+        json!({"split": "hidden", "object": object, "view_space": "whole", "budget": "auto",
+               "method": "test-nbv", "family": "learned", "record_timings": false})
+    };
+    // One finished episode, one left running after two moves.
+    let done = c.create(&body("cube")).unwrap()["episode_id"].as_str().unwrap().to_string();
+    act(&c, &done, 0, json!({"type": "move", "pose": pose([1.0, 0.0, 0.5])}));
+    act(&c, &done, 1, json!({"type": "move", "pose": pose([0.0, 1.0, 0.5])}));
+    let end = act(&c, &done, 2, json!({"type": "stop", "reason": "plan_end"}));
+    assert_eq!(end["observation"]["terminal"]["reason"], "plan_end");
+    let finished_line = c.result(&done).unwrap();
+    let running = c.create(&body("octahedron")).unwrap()["episode_id"].as_str().unwrap().to_string();
+    act(&c, &running, 0, json!({"type": "move", "pose": pose([1.0, 0.2, 0.5])}));
+    act(&c, &running, 1, json!({"type": "move", "pose": pose([-1.0, 0.2, 0.5])}));
+    server.kill();
+    assert!(c.health().is_err(), "the server is gone");
+
+    let server = Server::start(&split, &db, &cache);
+    let c = Client::new(&server.url, None);
+    assert_eq!(c.result(&done).unwrap(), finished_line, "the finished result is intact");
+    let info = c.get_json(&format!("/v1/episodes/{running}")).unwrap();
+    assert_eq!(info["state"], "finished");
+    assert_eq!(info["views"], 3, "its stored actions were replayed");
+    assert_eq!(info["terminal"]["source"], "exception");
+    assert_eq!(info["terminal"]["reason"], "interrupted");
+    let err = c
+        .post_json(
+            &format!("/v1/episodes/{running}/actions"),
+            &json!({"step": 2, "action": {"type": "move", "pose": pose([0.0, 0.0, 1.0])}}),
+        )
+        .unwrap_err();
+    assert_eq!(err.code(), Some("episode_finished"));
+    let res: Value = serde_json::from_str(&c.result(&running).unwrap()).unwrap();
+    assert_eq!(res["visited_poses"].as_array().unwrap().len(), 3);
+    assert_eq!(res["visited_poses"][2], pose([-1.0, 0.2, 0.5]));
+    let sc = res["checkpoints"]["terminal"]["sc"]["0.02"].as_f64().unwrap();
+    assert!(sc > 0.0 && sc <= 1.0, "the views taken are scored");
+    // Replaying gives the metrics the engine gives: the same steps as a second restart's.
+    drop(server);
+    let server = Server::start(&split, &db, &cache);
+    let c = Client::new(&server.url, None);
+    let again: Value = serde_json::from_str(&c.result(&running).unwrap()).unwrap();
+    assert_eq!(again["steps"], res["steps"]);
+
+    // Export (the server may keep running) → objview report reads it.
+    let out = dir.path().join("export/results.jsonl");
+    objview_ok(&["export", "--db", s(&db), "--out", s(&out)]);
+    let text = std::fs::read_to_string(&out).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 2);
+    assert_eq!(lines[0], finished_line.trim_end(), "the export holds the result lines as served");
+    let one = dir.path().join("one.jsonl");
+    objview_ok(&["export", "--db", s(&db), "--out", s(&one), "--method", "nobody"]);
+    assert_eq!(std::fs::read_to_string(&one).unwrap(), "");
+    let report = dir.path().join("report");
+    objview_ok(&["report", s(&out), "--out", s(&report)]);
+    assert!(std::fs::read_dir(&report).unwrap().count() > 0);
+    assert!(objview_err(&["export", "--db", s(&dir.path().join("nope.sqlite")), "--out", s(&one)])
+        .contains("nope.sqlite"));
+}
+
+#[test]
+fn run_with_server_writes_the_file_of_a_local_run() {
+    let dir = tempdir();
+    let split = pool(dir.path());
+    let (db, cache) = (dir.path().join("server.sqlite"), dir.path().join("cache"));
+    let server = Server::start(&split, &db, &cache);
+    let run_as = |planner: &str, budget: &str, out: &Path, extra: &[&str]| -> Vec<String> {
+        let mut a: Vec<String> = [
+            "run",
+            "--planner",
+            planner,
+            "--space",
+            "quarter",
+            "--budget",
+            budget,
+            "--seed",
+            "7",
+            "--out",
+            s(out),
+            "--no-timings",
+            "--quiet",
+        ]
+        .iter()
+        .map(|x| x.to_string())
+        .collect();
+        a.extend(extra.iter().map(|x| x.to_string()));
+        a
+    };
+    let run = |out: &Path, extra: &[&str]| run_as("random-tsp", "5", out, extra);
+    let local = dir.path().join("local.jsonl");
+    let args = run(&local, &["--objects", s(&split), "--cache-dir", s(&cache)]);
+    objview_ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let remote = dir.path().join("remote.jsonl");
+    // The split file's path stands for its split on the server.
+    let args = run(&remote, &["--objects", s(&split), "--server", &server.url]);
+    objview_ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let local_text = std::fs::read_to_string(&local).unwrap();
+    assert_eq!(local_text.lines().count(), 2);
+    assert_eq!(std::fs::read_to_string(&remote).unwrap(), local_text);
+    // One object by index, the other by uid.
+    let picked = dir.path().join("picked.jsonl");
+    let args = run(&picked, &["--objects", "hidden:1", "--server", &server.url]);
+    objview_ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(
+        std::fs::read_to_string(&picked).unwrap(),
+        local_text.lines().nth(1).unwrap().to_string() + "\n"
+    );
+    // What a server cannot do, or does itself, is refused with one clear line.
+    for (planner, budget, extra, why) in [
+        ("oracle", "auto", vec!["--objects", "hidden"], "ground truth"),
+        ("random-tsp", "5", vec!["--objects", "hidden", "--cap", "10"], "--cap is a setting of the server"),
+        ("random-tsp", "5", vec!["--objects", "nope"], "nope"),
+        ("random-tsp", "5", vec!["--objects", "hidden:sphere"], "no object \"sphere\""),
+        ("random-tsp", "5", vec!["--objects", "hidden:5"], "no index 5"),
+    ] {
+        let out = dir.path().join("refused.jsonl");
+        let mut args = run_as(planner, budget, &out, &extra);
+        args.extend(["--server".to_string(), server.url.clone()]);
+        let err = objview_err(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        assert!(err.contains(why), "{extra:?}: {err}");
+    }
+}
+
+#[test]
+fn bench_serve_runs_concurrent_clients_against_an_in_process_server() {
+    let dir = tempdir();
+    let json_out = dir.path().join("bench.json");
+    let cache = dir.path().join("cache");
+    let out = objview_ok(&[
+        "bench",
+        "serve",
+        "--clients",
+        "3",
+        "--episodes-per-client",
+        "2",
+        "--budget",
+        "2",
+        "--object",
+        "cube",
+        "--triangles",
+        "200",
+        "--gt-points",
+        "2000",
+        "--cache-dir",
+        s(&cache),
+        "--json",
+        s(&json_out),
+    ]);
+    assert!(out.contains("moves/s") && out.contains("p99"), "{out}");
+    let v: Value = serde_json::from_str(&std::fs::read_to_string(&json_out).unwrap()).unwrap();
+    let r = &v["report"];
+    assert_eq!(r["episodes"], 6);
+    assert_eq!(r["steps"], 12);
+    assert_eq!(r["client"]["samples"], 12);
+    assert_eq!(r["server"]["samples"], 12, "every action answer carries Server-Timing");
+    assert!(r["steps_per_second"].as_f64().unwrap() > 0.0);
+}

@@ -1,0 +1,397 @@
+//! The routes of docs/server-api.md (v1). Handlers parse and validate the request, then run the
+//! episode operation of [`crate::state`] on tokio's blocking pool (engine work is CPU-bound).
+//! Every error is `{"error": {"code", "message"}}` with the contract's status, including unknown
+//! routes (404), wrong methods (405) and bodies over [`BODY_LIMIT`] (413).
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use axum::body::Bytes;
+use axum::extract::{DefaultBodyLimit, FromRequest, FromRequestParts, Request, State};
+use axum::http::header::{HeaderName, HeaderValue, CONTENT_TYPE};
+use axum::http::request::Parts;
+use axum::http::{HeaderMap, StatusCode};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use axum::{Json, Router};
+use objview_geom::Pose;
+use serde_json::{json, Value};
+
+use crate::auth::Caller;
+use crate::error::ApiError;
+use crate::pool::{CANDIDATE_SETS, VIEW_SPACES};
+use crate::state::{AppState, CreateSpec, Slot, MAX_FEASIBLE_POSES};
+
+/// The request body limit (1 MiB).
+pub const BODY_LIMIT: usize = 1 << 20;
+
+/// The header that carries the step of a depth or RGB observation.
+pub const STEP_HEADER: &str = "x-objview-step";
+
+/// The router of the whole API over `state`.
+pub fn router(state: Arc<AppState>) -> Router {
+    Router::new()
+        .route("/openapi.json", get(openapi))
+        .route("/v1/health", get(health))
+        .route("/v1/splits", get(splits))
+        .route("/v1/splits/{split}", get(split))
+        .route("/v1/view-spaces", get(view_spaces))
+        .route("/v1/candidate-sets", get(candidate_sets))
+        .route("/v1/candidate-sets/{name}", get(candidate_set))
+        .route("/v1/episodes", post(create))
+        .route("/v1/episodes/{id}", get(episode))
+        .route("/v1/episodes/{id}/observation", get(observation))
+        .route("/v1/episodes/{id}/observation/depth.npy", get(depth))
+        .route("/v1/episodes/{id}/observation/rgb.png", get(rgb))
+        .route("/v1/episodes/{id}/feasible", post(feasible))
+        .route("/v1/episodes/{id}/actions", post(act))
+        .route("/v1/episodes/{id}/abort", post(abort))
+        .route("/v1/episodes/{id}/result", get(result))
+        .route("/v1/methods", get(methods))
+        .route("/v1/methods/{method}/results", get(method_results))
+        .fallback(unknown_route)
+        .method_not_allowed_fallback(wrong_method)
+        .layer(DefaultBodyLimit::max(BODY_LIMIT))
+        .with_state(state)
+}
+
+async fn unknown_route(req: Request) -> ApiError {
+    ApiError::NotFound(format!("no route {}", req.uri().path()))
+}
+
+async fn wrong_method(req: Request) -> ApiError {
+    ApiError::MethodNotAllowed(format!("{} is not allowed on {}", req.method(), req.uri().path()))
+}
+
+/// A JSON request body: 413 over the limit, 400 when it is not JSON.
+struct Body(Value);
+
+impl<S: Send + Sync> FromRequest<S> for Body {
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, state: &S) -> Result<Body, ApiError> {
+        let bytes = Bytes::from_request(req, state).await.map_err(|e| {
+            if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+                ApiError::PayloadTooLarge(format!("the body is over the limit of {BODY_LIMIT} bytes"))
+            } else {
+                ApiError::MalformedJson(format!("the body could not be read: {e}"))
+            }
+        })?;
+        serde_json::from_slice(&bytes)
+            .map(Body)
+            .map_err(|e| ApiError::MalformedJson(format!("the body is not JSON: {e}")))
+    }
+}
+
+/// The last path segment parameter (an episode id, split, set or method name), as a string.
+struct Param(String);
+
+impl<S: Send + Sync> FromRequestParts<S> for Param {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Param, ApiError> {
+        axum::extract::Path::<String>::from_request_parts(parts, state)
+            .await
+            .map(|p| Param(p.0))
+            .map_err(|e| ApiError::NotFound(format!("bad path: {e}")))
+    }
+}
+
+/// `?step=N`, if given.
+fn step_query(parts: &axum::http::Uri) -> Result<Option<u64>, ApiError> {
+    let Some(q) = parts.query() else { return Ok(None) };
+    let mut step = None;
+    for pair in q.split('&').filter(|p| !p.is_empty()) {
+        let (k, v) = pair.split_once('=').unwrap_or((pair, ""));
+        if k == "step" {
+            step = Some(v.parse::<u64>().map_err(|_| {
+                ApiError::InvalidRequest(format!("`step` must be a non-negative integer, got {v:?}"))
+            })?);
+        }
+    }
+    Ok(step)
+}
+
+/// Runs engine work off the async executor once the engine gate lets it in.
+async fn engine<T: Send + 'static>(
+    st: &Arc<AppState>,
+    f: impl FnOnce() -> Result<T, ApiError> + Send + 'static,
+) -> Result<T, ApiError> {
+    let _permit =
+        st.engine_gate.acquire().await.map_err(|e| ApiError::Internal(format!("engine gate: {e}")))?;
+    blocking(f).await
+}
+
+/// Runs blocking episode work off the async executor.
+async fn blocking<T: Send + 'static>(
+    f: impl FnOnce() -> Result<T, ApiError> + Send + 'static,
+) -> Result<T, ApiError> {
+    tokio::task::spawn_blocking(f)
+        .await
+        .unwrap_or_else(|e| Err(ApiError::Internal(format!("the request failed: {e}"))))
+}
+
+async fn openapi() -> Json<Value> {
+    Json(crate::openapi::document())
+}
+
+async fn health() -> Json<Value> {
+    Json(json!({"status": "ok", "version": crate::spec::VERSION}))
+}
+
+async fn splits(State(st): State<Arc<AppState>>, _c: Caller) -> Json<Value> {
+    let list: Vec<Value> = st
+        .pool
+        .splits
+        .iter()
+        .map(|s| json!({"id": s.id, "objects": s.objects.len(), "public": s.public}))
+        .collect();
+    Json(json!({ "splits": list }))
+}
+
+async fn split(
+    State(st): State<Arc<AppState>>,
+    _c: Caller,
+    Param(id): Param,
+) -> Result<Json<Value>, ApiError> {
+    let s = st.pool.split(&id).ok_or_else(|| ApiError::NotFound(format!("no split {id:?}")))?;
+    let ids: Vec<&str> = s.objects.iter().map(|o| o.uid.as_str()).collect();
+    Ok(Json(json!({"id": s.id, "objects": ids.len(), "public": s.public, "object_ids": ids})))
+}
+
+async fn view_spaces(_c: Caller) -> Json<Value> {
+    Json(json!({ "view_spaces": VIEW_SPACES }))
+}
+
+async fn candidate_sets(_c: Caller) -> Json<Value> {
+    Json(json!({ "candidate_sets": CANDIDATE_SETS }))
+}
+
+async fn candidate_set(
+    State(st): State<Arc<AppState>>,
+    _c: Caller,
+    Param(name): Param,
+) -> Result<Json<Value>, ApiError> {
+    let poses = st.candidate_set(&name).ok_or_else(|| {
+        ApiError::NotFound(format!("no candidate set {name:?} (known: {})", CANDIDATE_SETS.join(", ")))
+    })?;
+    let poses: Vec<[f64; 7]> = poses.iter().map(|p| p.to_array()).collect();
+    Ok(Json(json!({"name": name, "poses": poses})))
+}
+
+async fn create(State(st): State<Arc<AppState>>, c: Caller, Body(body): Body) -> Result<Response, ApiError> {
+    let spec = CreateSpec::parse(&body, &st.pool)?;
+    let gate = st.clone();
+    let v = engine(&gate, move || st.create(&c.owner, spec)).await?;
+    Ok((StatusCode::CREATED, Json(v)).into_response())
+}
+
+async fn slot_of(st: &Arc<AppState>, c: &Caller, id: &str) -> Result<Arc<Slot>, ApiError> {
+    st.slot(&c.owner, id)
+}
+
+async fn episode(
+    State(st): State<Arc<AppState>>,
+    c: Caller,
+    Param(id): Param,
+) -> Result<Json<Value>, ApiError> {
+    let slot = slot_of(&st, &c, &id).await?;
+    // Only a public split's info may need the engine (its running metrics).
+    if st.pool.split(&slot.spec.split).is_some_and(|s| s.public) {
+        let gate = st.clone();
+        Ok(Json(engine(&gate, move || st.info(&slot)).await?))
+    } else {
+        Ok(Json(blocking(move || st.info(&slot)).await?))
+    }
+}
+
+async fn observation(
+    State(st): State<Arc<AppState>>,
+    c: Caller,
+    Param(id): Param,
+) -> Result<Json<Value>, ApiError> {
+    let slot = slot_of(&st, &c, &id).await?;
+    Ok(Json(blocking(move || st.observation(&slot)).await?))
+}
+
+fn step_header(step: usize) -> (HeaderName, HeaderValue) {
+    (HeaderName::from_static(STEP_HEADER), HeaderValue::from(step as u64))
+}
+
+async fn depth(
+    State(st): State<Arc<AppState>>,
+    c: Caller,
+    Param(id): Param,
+    uri: axum::http::Uri,
+) -> Result<Response, ApiError> {
+    let want = step_query(&uri)?;
+    let slot = slot_of(&st, &c, &id).await?;
+    let (step, depth) = blocking(move || st.depth(&slot, want)).await?;
+    let side = (depth.len() as f64).sqrt() as usize;
+    let shape = if side * side == depth.len() { [side, side] } else { [1, depth.len()] };
+    let mut bytes = objview_geom::npy::npy_header("<f4", &shape);
+    bytes.reserve(depth.len() * 4);
+    for d in depth.iter() {
+        bytes.extend_from_slice(&d.to_le_bytes());
+    }
+    let mut h = HeaderMap::new();
+    h.insert(CONTENT_TYPE, HeaderValue::from_static("application/octet-stream"));
+    let (k, v) = step_header(step);
+    h.insert(k, v);
+    Ok((h, bytes).into_response())
+}
+
+async fn rgb(
+    State(st): State<Arc<AppState>>,
+    c: Caller,
+    Param(id): Param,
+    uri: axum::http::Uri,
+) -> Result<Response, ApiError> {
+    let want = step_query(&uri)?;
+    let slot = slot_of(&st, &c, &id).await?;
+    let gate = st.clone();
+    let (step, png) = engine(&gate, move || {
+        let (step, w, h, px) = st.rgb(&slot, want)?;
+        let flat: Vec<u8> = px.iter().flat_map(|p| p.iter().copied()).collect();
+        let img =
+            image::RgbImage::from_raw(w, h, flat).ok_or_else(|| ApiError::Internal("image size".into()))?;
+        let mut png = Vec::new();
+        img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+            .map_err(|e| ApiError::Internal(format!("encoding the PNG: {e}")))?;
+        Ok((step, png))
+    })
+    .await?;
+    let mut h = HeaderMap::new();
+    h.insert(CONTENT_TYPE, HeaderValue::from_static("image/png"));
+    let (k, v) = step_header(step);
+    h.insert(k, v);
+    Ok((h, png).into_response())
+}
+
+/// A pose of a request: 7 finite numbers.
+fn parse_pose(v: &Value) -> Option<Pose> {
+    let a = v.as_array().filter(|a| a.len() == 7)?;
+    let mut out = [0.0; 7];
+    for (o, x) in out.iter_mut().zip(a) {
+        *o = x.as_f64()?;
+    }
+    Pose::from_array(out)
+}
+
+async fn feasible(
+    State(st): State<Arc<AppState>>,
+    c: Caller,
+    Param(id): Param,
+    Body(body): Body,
+) -> Result<Json<Value>, ApiError> {
+    let slot = slot_of(&st, &c, &id).await?;
+    let list = body
+        .get("poses")
+        .and_then(Value::as_array)
+        .ok_or_else(|| ApiError::InvalidRequest("the body must be {\"poses\": [[7 numbers], …]}".into()))?;
+    if list.len() > MAX_FEASIBLE_POSES {
+        return Err(ApiError::InvalidRequest(format!(
+            "`poses` has {} poses; at most {MAX_FEASIBLE_POSES} per request",
+            list.len()
+        )));
+    }
+    let poses = list
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            parse_pose(p)
+                .ok_or_else(|| ApiError::InvalidRequest(format!("`poses[{i}]` is not 7 finite numbers: {p}")))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let mask = st.feasible(&slot, &poses)?;
+    Ok(Json(json!({ "feasible": mask })))
+}
+
+async fn act(
+    State(st): State<Arc<AppState>>,
+    c: Caller,
+    Param(id): Param,
+    Body(body): Body,
+) -> Result<Response, ApiError> {
+    let received = Instant::now();
+    let slot = slot_of(&st, &c, &id).await?;
+    let Value::Object(m) = &body else {
+        return Err(ApiError::InvalidRequest("the body must be {\"step\": N, \"action\": {…}}".into()));
+    };
+    let step = m
+        .get("step")
+        .and_then(Value::as_u64)
+        .ok_or_else(|| ApiError::InvalidRequest("`step` must be a non-negative integer".into()))?;
+    let action = match m.get("action") {
+        Some(a @ Value::Object(_)) => a.clone(),
+        Some(other) => {
+            return Err(ApiError::InvalidRequest(format!("`action` must be a JSON object, got {other}")))
+        }
+        None => return Err(ApiError::InvalidRequest("missing field `action`".into())),
+    };
+    let _in_flight = crate::state::InFlight::new(slot.clone());
+    let gate = st.clone();
+    let obs = engine(&gate, move || st.act(&slot, step, &action, received)).await?;
+    let mut h = HeaderMap::new();
+    let ms = received.elapsed().as_secs_f64() * 1e3;
+    if let Ok(v) = HeaderValue::from_str(&format!("handler;dur={ms:.3}")) {
+        h.insert(HeaderName::from_static("server-timing"), v);
+    }
+    Ok((h, Json(json!({"accepted": true, "observation": obs}))).into_response())
+}
+
+async fn abort(
+    State(st): State<Arc<AppState>>,
+    c: Caller,
+    Param(id): Param,
+    Body(body): Body,
+) -> Result<Json<Value>, ApiError> {
+    let slot = slot_of(&st, &c, &id).await?;
+    let detail = match body.get("detail") {
+        None | Some(Value::Null) => String::new(),
+        Some(Value::String(s)) => s.clone(),
+        Some(other) => {
+            return Err(ApiError::InvalidRequest(format!("`detail` must be a string, got {other}")))
+        }
+    };
+    let obs = blocking(move || st.abort(&slot, detail)).await?;
+    Ok(Json(json!({"accepted": true, "observation": obs})))
+}
+
+async fn result(State(st): State<Arc<AppState>>, c: Caller, Param(id): Param) -> Result<Response, ApiError> {
+    let slot = slot_of(&st, &c, &id).await?;
+    let line = blocking(move || st.result(&slot)).await?;
+    Ok(([(CONTENT_TYPE, "application/json")], line).into_response())
+}
+
+async fn methods(State(st): State<Arc<AppState>>, c: Caller) -> Result<Json<Value>, ApiError> {
+    let rows = blocking(move || {
+        st.db.methods(&c.owner).map_err(|e| ApiError::Internal(format!("reading results: {e}")))
+    })
+    .await?;
+    let list: Vec<Value> = rows.into_iter().map(|(m, n)| json!({"method": m, "finished": n})).collect();
+    Ok(Json(json!({ "methods": list })))
+}
+
+async fn method_results(
+    State(st): State<Arc<AppState>>,
+    c: Caller,
+    Param(method): Param,
+) -> Result<Response, ApiError> {
+    let m = method.clone();
+    let lines = blocking(move || {
+        st.db
+            .results(Some(&c.owner), Some(&m))
+            .map_err(|e| ApiError::Internal(format!("reading results: {e}")))
+    })
+    .await?;
+    if lines.is_empty() {
+        return Err(ApiError::NotFound(format!("no finished results of method {method:?}")));
+    }
+    let mut body = String::new();
+    for l in lines {
+        body.push_str(&l);
+        body.push('\n');
+    }
+    Ok(([(CONTENT_TYPE, "application/x-ndjson")], body).into_response())
+}

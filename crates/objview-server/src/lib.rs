@@ -1,0 +1,220 @@
+//! The objview evaluation server: online episodes (SPEC §5) over HTTP/JSON for remote planners
+//! on objects they never see. docs/server-api.md is the contract.
+//!
+//! - [`api`] — the routes; [`openapi`] — `GET /openapi.json`.
+//! - [`state`] — episodes in memory (one lock each), time limits, replay after a restart.
+//! - [`db`] — persistence (SQLite, WAL) and `objview export`.
+//! - [`pool`] — split files and the cache of prepared scenes.
+//! - [`auth`] — bearer tokens and episode owners; [`error`] — errors and their statuses.
+//! - [`spec`] — the result-line settings record shared with local `objview run`.
+//! - [`client`] — a blocking client, and the driver that runs a local [`objview_episode::Planner`]
+//!   against a server (`objview run --server`).
+//! - [`load`] — the load generator of `objview bench serve`.
+//!
+//! Engine work (rendering, fusion, metrics) runs on tokio's blocking pool; the async side only
+//! parses, routes and waits.
+
+pub mod api;
+pub mod auth;
+pub mod client;
+pub mod db;
+pub mod error;
+pub mod load;
+pub mod openapi;
+pub mod pool;
+pub mod spec;
+pub mod state;
+
+use std::future::Future;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use objview_geom::normalize::Normalization;
+
+pub use error::{ApiError, ServerError};
+pub use state::AppState;
+
+/// Everything `objview serve` is configured with.
+#[derive(Debug, Clone)]
+pub struct ServerConfig {
+    /// Split files (`objview pool split` output).
+    pub pool: Vec<PathBuf>,
+    /// Split ids whose running episodes show metrics.
+    pub public: Vec<String>,
+    /// The database file.
+    pub db: PathBuf,
+    /// The tokens file (none: no authentication).
+    pub tokens: Option<PathBuf>,
+    /// Seconds a client has for each action after an observation.
+    pub action_timeout_s: f64,
+    /// Seconds a client has for its first action after the create response.
+    pub start_timeout_s: f64,
+    /// Observable-reference cache folder (none: not cached on disk).
+    pub cache_dir: Option<PathBuf>,
+    /// How meshes are normalized (`unit` for raw assets, like `objview run`).
+    pub normalize: Normalization,
+}
+
+impl Default for ServerConfig {
+    fn default() -> Self {
+        ServerConfig {
+            pool: Vec::new(),
+            public: Vec::new(),
+            db: PathBuf::from("objview-server.sqlite"),
+            tokens: None,
+            action_timeout_s: 100.0,
+            start_timeout_s: 300.0,
+            cache_dir: None,
+            normalize: Normalization::Unit,
+        }
+    }
+}
+
+fn seconds(name: &str, s: f64) -> Result<Duration, ServerError> {
+    if s.is_finite() && s > 0.0 && s < 1e9 {
+        Ok(Duration::from_secs_f64(s))
+    } else {
+        Err(ServerError::Config(format!("{name} must be a positive number of seconds, got {s}")))
+    }
+}
+
+/// Loads the pool, opens the database, reads the tokens and finishes the episodes a previous
+/// server left running (replayed, ended `exception` / `interrupted`).
+pub fn build_state(cfg: &ServerConfig) -> Result<Arc<AppState>, ServerError> {
+    let limits = state::Limits {
+        action_timeout: seconds("--action-timeout", cfg.action_timeout_s)?,
+        start_timeout: seconds("--start-timeout", cfg.start_timeout_s)?,
+    };
+    if cfg.pool.is_empty() {
+        return Err(ServerError::Config("no split files (--pool SPLIT.json)".into()));
+    }
+    let pool = pool::Pool::load(&cfg.pool, &cfg.public)?;
+    let tokens = cfg.tokens.as_deref().map(auth::Tokens::load).transpose()?;
+    let db = db::Db::open(&cfg.db)?;
+    let scenes = pool::SceneCache::new(cfg.normalize, cfg.cache_dir.clone());
+    Ok(Arc::new(AppState::new(pool, scenes, db, tokens, limits)?))
+}
+
+/// Serves the API on `listener` until `shutdown` resolves; a background task ends episodes
+/// whose client is late.
+pub async fn serve(
+    listener: tokio::net::TcpListener,
+    state: Arc<AppState>,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> Result<(), ServerError> {
+    let tick = (state.limits.action_timeout.min(state.limits.start_timeout) / 4)
+        .clamp(Duration::from_millis(20), Duration::from_secs(1));
+    let sweeper_state = state.clone();
+    let sweeper = tokio::spawn(async move {
+        let mut interval = tokio::time::interval(tick);
+        interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        loop {
+            interval.tick().await;
+            let s = sweeper_state.clone();
+            let _ = tokio::task::spawn_blocking(move || s.sweep()).await;
+        }
+    });
+    let app = api::router(state);
+    let r = axum::serve(listener, app).with_graceful_shutdown(shutdown).await;
+    sweeper.abort();
+    r.map_err(|e| ServerError::Io(format!("serving: {e}")))
+}
+
+/// `objview serve`: builds the state, binds `addr`, calls `ready` with the bound address and
+/// serves until Ctrl-C.
+pub fn run(
+    cfg: &ServerConfig,
+    addr: &str,
+    ready: impl FnOnce(SocketAddr, &AppState),
+) -> Result<(), ServerError> {
+    let state = build_state(cfg)?;
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| ServerError::Io(format!("starting the runtime: {e}")))?;
+    rt.block_on(async move {
+        let listener = tokio::net::TcpListener::bind(addr)
+            .await
+            .map_err(|e| ServerError::Io(format!("binding {addr}: {e}")))?;
+        let bound = listener.local_addr().map_err(|e| ServerError::Io(e.to_string()))?;
+        ready(bound, &state);
+        serve(listener, state, async {
+            let _ = tokio::signal::ctrl_c().await;
+        })
+        .await
+    })
+}
+
+/// A server running on its own thread (tests, `objview bench serve`); stopped when dropped.
+pub struct BackgroundServer {
+    /// The bound address.
+    pub addr: SocketAddr,
+    /// The shared state (for inspection).
+    pub state: Arc<AppState>,
+    stop: Option<tokio::sync::oneshot::Sender<()>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl BackgroundServer {
+    /// `http://ADDR`.
+    pub fn url(&self) -> String {
+        format!("http://{}", self.addr)
+    }
+
+    /// Stops the server and waits for it.
+    pub fn stop(mut self) {
+        self.shutdown();
+    }
+
+    fn shutdown(&mut self) {
+        if let Some(s) = self.stop.take() {
+            let _ = s.send(());
+        }
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+impl Drop for BackgroundServer {
+    fn drop(&mut self) {
+        self.shutdown();
+    }
+}
+
+/// Starts a server for `cfg` on `addr` (e.g. `127.0.0.1:0` for a free port) on a new thread.
+pub fn spawn(cfg: &ServerConfig, addr: &str) -> Result<BackgroundServer, ServerError> {
+    let state = build_state(cfg)?;
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| ServerError::Io(format!("starting the runtime: {e}")))?;
+    let std_listener =
+        std::net::TcpListener::bind(addr).map_err(|e| ServerError::Io(format!("binding {addr}: {e}")))?;
+    std_listener.set_nonblocking(true).map_err(|e| ServerError::Io(e.to_string()))?;
+    let bound = std_listener.local_addr().map_err(|e| ServerError::Io(e.to_string()))?;
+    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+    let st = state.clone();
+    let thread = std::thread::spawn(move || {
+        rt.block_on(async move {
+            let listener = match tokio::net::TcpListener::from_std(std_listener) {
+                Ok(l) => l,
+                Err(e) => {
+                    eprintln!("objview serve: {e}");
+                    return;
+                }
+            };
+            if let Err(e) = serve(listener, st, async {
+                let _ = rx.await;
+            })
+            .await
+            {
+                eprintln!("objview serve: {e}");
+            }
+        });
+        rt.shutdown_timeout(Duration::from_secs(5));
+    });
+    Ok(BackgroundServer { addr: bound, state, stop: Some(tx), thread: Some(thread) })
+}

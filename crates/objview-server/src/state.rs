@@ -1,0 +1,906 @@
+//! Episodes in memory: the server's shared state and every episode operation the routes call.
+//!
+//! Each episode lives in a [`Slot`] behind its own `std::sync::Mutex`; the operations here are
+//! blocking (engine work: rendering, fusion, metrics; database writes) and the routes run them
+//! on tokio's blocking pool, never holding a lock across an `.await`. An action checks the step
+//! under the episode's lock, so of two concurrent actions for one step exactly one is applied.
+//! Lock order: the episode table, then one episode, then the database.
+//!
+//! Hidden means hidden: nothing built here for a running episode carries geometry, ground truth,
+//! reference points, coverage, CD or a number derived from them, except `metrics` on public
+//! splits; file paths never leave the server.
+
+use std::collections::{BTreeMap, HashMap};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use objview_episode::{Action, Budget, Episode, EpisodeSettings, ExecutionMode, MethodInfo, TerminalSource};
+use objview_geom::Pose;
+use objview_render::Camera;
+use objview_views::{ViewSet, ViewSpace};
+use serde::{Deserialize, Serialize};
+use serde_json::{json, Value};
+
+use crate::auth::Tokens;
+use crate::db::{ActionRow, Db, EpisodeRow};
+use crate::error::{ApiError, ServerError};
+use crate::pool::{ObjectKey, Pool, SceneCache, CANDIDATE_SETS, VIEW_SPACES};
+use crate::spec::RunRecord;
+
+/// Most poses in one feasibility query.
+pub const MAX_FEASIBLE_POSES: usize = 4_096;
+
+/// Families a remote planner may declare (`oracle` is refused: it reads ground truth).
+pub const FAMILIES: [&str; 4] = ["classical", "learned", "hybrid", "baseline"];
+
+/// A validated create request: everything needed to start the episode again (it is stored, and
+/// replayed after a restart).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CreateSpec {
+    pub split: String,
+    /// The object's uid.
+    pub object: String,
+    pub view_space: String,
+    /// `auto` or K.
+    pub budget: String,
+    pub method: String,
+    pub family: String,
+    pub execution_mode: String,
+    pub candidate_set: String,
+    /// The user seed.
+    pub seed: u64,
+    pub params: Value,
+    pub record_timings: bool,
+}
+
+fn field<'a>(m: &'a serde_json::Map<String, Value>, name: &str) -> Option<&'a Value> {
+    m.get(name).filter(|v| !v.is_null())
+}
+
+fn string_field(
+    m: &serde_json::Map<String, Value>,
+    name: &str,
+    default: Option<&str>,
+) -> Result<String, ApiError> {
+    match field(m, name) {
+        None => default
+            .map(str::to_string)
+            .ok_or_else(|| ApiError::InvalidRequest(format!("missing field `{name}`"))),
+        Some(Value::String(s)) => Ok(s.clone()),
+        Some(other) => Err(ApiError::InvalidRequest(format!("`{name}` must be a string, got {other}"))),
+    }
+}
+
+fn one_of(name: &str, value: String, allowed: &[&str]) -> Result<String, ApiError> {
+    if allowed.contains(&value.as_str()) {
+        Ok(value)
+    } else {
+        Err(ApiError::InvalidRequest(format!("unknown {name} {value:?} (known: {})", allowed.join(", "))))
+    }
+}
+
+/// Whether `s` is a valid method name: 1–100 characters of `A-Z a-z 0-9 . _ + -`.
+pub fn valid_method_name(s: &str) -> bool {
+    (1..=100).contains(&s.len()) && s.chars().all(|c| c.is_ascii_alphanumeric() || "._+-".contains(c))
+}
+
+impl CreateSpec {
+    /// Validates a create request body against the pool (docs/server-api.md, `POST
+    /// /v1/episodes`): 422 for a wrong shape or an unknown split, view space, candidate set or
+    /// budget; 404 for an unknown object.
+    pub fn parse(body: &Value, pool: &Pool) -> Result<CreateSpec, ApiError> {
+        let Value::Object(m) = body else {
+            return Err(ApiError::InvalidRequest("the body must be a JSON object".into()));
+        };
+        let split_id = string_field(m, "split", None)?;
+        let split = pool.split(&split_id).ok_or_else(|| {
+            ApiError::InvalidRequest(format!(
+                "unknown split {split_id:?} (splits: {})",
+                pool.splits.iter().map(|s| s.id.as_str()).collect::<Vec<_>>().join(", ")
+            ))
+        })?;
+        let key = match field(m, "object") {
+            None => return Err(ApiError::InvalidRequest("missing field `object`".into())),
+            Some(Value::String(s)) => ObjectKey::Uid(s.clone()),
+            Some(Value::Number(n)) => match n.as_u64() {
+                Some(i) => ObjectKey::Index(i as usize),
+                None => {
+                    return Err(ApiError::InvalidRequest(format!(
+                        "`object` must be an index (a non-negative integer) or a uid, got {n}"
+                    )))
+                }
+            },
+            Some(other) => {
+                return Err(ApiError::InvalidRequest(format!(
+                    "`object` must be an index or a uid string, got {other}"
+                )))
+            }
+        };
+        let object = split
+            .object(&key)
+            .ok_or_else(|| {
+                ApiError::NotFound(match &key {
+                    ObjectKey::Index(i) => {
+                        format!("split {split_id} has no object {i} (it has {})", split.objects.len())
+                    }
+                    ObjectKey::Uid(u) => format!("split {split_id} has no object {u:?}"),
+                })
+            })?
+            .uid
+            .clone();
+        let view_space = one_of("view space", string_field(m, "view_space", None)?, &VIEW_SPACES)?;
+        let budget = match field(m, "budget") {
+            None => return Err(ApiError::InvalidRequest("missing field `budget`".into())),
+            Some(Value::String(s)) => Budget::parse(s),
+            Some(Value::Number(n)) => Budget::parse(&n.to_string()),
+            Some(other) => Err(format!("got {other}")),
+        }
+        .map_err(|e| {
+            ApiError::InvalidRequest(format!("`budget` must be \"auto\" or a positive integer: {e}"))
+        })?;
+        let method = string_field(m, "method", None)?;
+        if !valid_method_name(&method) {
+            return Err(ApiError::InvalidRequest(format!(
+                "`method` must be 1–100 characters of A-Z a-z 0-9 . _ + -, got {method:?}"
+            )));
+        }
+        let family = string_field(m, "family", Some("classical"))?;
+        if family == "oracle" {
+            return Err(ApiError::InvalidRequest(
+                "family `oracle` is refused: a remote planner never reads ground truth".into(),
+            ));
+        }
+        let family = one_of("family", family, &FAMILIES)?;
+        let execution_mode = one_of(
+            "execution_mode",
+            string_field(m, "execution_mode", Some("iterative"))?,
+            &["iterative", "budgeted_plan", "set_cover_plan"],
+        )?;
+        if execution_mode == "budgeted_plan" && budget == Budget::Auto {
+            return Err(ApiError::InvalidRequest(
+                "a budgeted_plan needs a fixed budget K, not \"auto\"".into(),
+            ));
+        }
+        let candidate_set =
+            one_of("candidate set", string_field(m, "candidate_set", Some("tammes-360"))?, &CANDIDATE_SETS)?;
+        let seed = match field(m, "seed") {
+            None => 0,
+            Some(v) => v.as_u64().ok_or_else(|| {
+                ApiError::InvalidRequest(format!("`seed` must be a non-negative integer, got {v}"))
+            })?,
+        };
+        let params = field(m, "params").cloned().unwrap_or_else(|| json!({}));
+        let record_timings = match field(m, "record_timings") {
+            None => true,
+            Some(Value::Bool(b)) => *b,
+            Some(other) => {
+                return Err(ApiError::InvalidRequest(format!(
+                    "`record_timings` must be true or false, got {other}"
+                )))
+            }
+        };
+        Ok(CreateSpec {
+            split: split_id,
+            object,
+            view_space,
+            budget: budget.label(),
+            method,
+            family,
+            execution_mode,
+            candidate_set,
+            seed,
+            params,
+            record_timings,
+        })
+    }
+
+    fn budget(&self) -> Budget {
+        Budget::parse(&self.budget).unwrap_or(Budget::Auto)
+    }
+
+    fn mode(&self) -> ExecutionMode {
+        serde_json::from_value(Value::String(self.execution_mode.clone())).unwrap_or(ExecutionMode::Iterative)
+    }
+}
+
+/// How an episode ended, as the API shows it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TerminalInfo {
+    pub source: String,
+    pub reason: String,
+    pub detail: String,
+}
+
+fn source_name(s: TerminalSource) -> String {
+    serde_json::to_value(s).ok().and_then(|v| v.as_str().map(str::to_string)).unwrap_or_default()
+}
+
+/// What is kept of a finished episode (read back from its result line on first use).
+#[derive(Debug, Clone)]
+struct Finished {
+    history: Vec<[f64; 7]>,
+    terminal: TerminalInfo,
+}
+
+impl Finished {
+    fn from_line(line: &str) -> Result<Finished, ApiError> {
+        let v: Value =
+            serde_json::from_str(line).map_err(|e| ApiError::Internal(format!("stored result: {e}")))?;
+        let history: Vec<[f64; 7]> = serde_json::from_value(v["visited_poses"].clone())
+            .map_err(|e| ApiError::Internal(format!("stored result: {e}")))?;
+        let s = |k: &str| v[k].as_str().unwrap_or_default().to_string();
+        Ok(Finished {
+            history,
+            terminal: TerminalInfo {
+                source: s("terminal_source"),
+                reason: s("terminal_reason"),
+                detail: s("terminal_detail"),
+            },
+        })
+    }
+
+    fn obs(&self) -> Value {
+        obs_json(self.history.len().saturating_sub(1), self.history.last().copied(), Some(&self.terminal))
+    }
+}
+
+struct Running {
+    ep: Episode,
+    record: Value,
+    /// When the current observation was produced.
+    obs_at: Instant,
+    /// When the client loses the episode.
+    deadline: Instant,
+    /// Applied actions (raw JSON) and the planning time each was given.
+    actions: Vec<(Value, f64)>,
+}
+
+impl Running {
+    fn step(&self) -> usize {
+        self.ep.history().len() - 1
+    }
+
+    fn pose(&self) -> Option<[f64; 7]> {
+        self.ep.history().last().map(|p| p.to_array())
+    }
+
+    fn obs(&self) -> Value {
+        let t = self.ep.terminal().map(|t| TerminalInfo {
+            source: source_name(t.source),
+            reason: t.reason.clone(),
+            detail: t.detail.clone(),
+        });
+        obs_json(self.step(), self.pose(), t.as_ref())
+    }
+}
+
+enum Live {
+    Running(Box<Running>),
+    /// Finished; the summary is read from the database on first use.
+    Finished(Option<Box<Finished>>),
+}
+
+/// One episode.
+pub struct Slot {
+    /// `e-` and 16 hex digits.
+    pub id: String,
+    /// Its owner (a token's hash; empty without tokens).
+    pub owner: String,
+    /// What it was created with.
+    pub spec: CreateSpec,
+    /// Actions received and not yet answered: while there are some, only they may end the
+    /// episode at its time limit (each judged by when it arrived, not by when the engine got
+    /// to it).
+    in_flight: AtomicUsize,
+    live: Mutex<Live>,
+}
+
+/// Counts an action in flight on a [`Slot`] until dropped.
+pub struct InFlight(Arc<Slot>);
+
+impl InFlight {
+    /// Marks an action as received on `slot`.
+    pub fn new(slot: Arc<Slot>) -> InFlight {
+        slot.in_flight.fetch_add(1, Ordering::SeqCst);
+        InFlight(slot)
+    }
+}
+
+impl Drop for InFlight {
+    fn drop(&mut self) {
+        self.0.in_flight.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// OBS: `{"step", "pose", "done", "terminal"}`.
+fn obs_json(step: usize, pose: Option<[f64; 7]>, terminal: Option<&TerminalInfo>) -> Value {
+    json!({"step": step, "pose": pose, "done": terminal.is_some(), "terminal": terminal})
+}
+
+/// Applies one raw action as received: an `action` that is not a well-formed move or stop ends
+/// the episode with `benchmark` / `invalid_action` (SPEC §5), like the engine does for a bad
+/// pose or reason. The same function replays stored actions after a restart.
+pub fn apply_raw(ep: &mut Episode, action: &Value, planner_seconds: f64) {
+    match serde_json::from_value::<Action>(action.clone()) {
+        Ok(a) => ep.apply(&a, planner_seconds),
+        Err(e) => {
+            ep.add_runtime(planner_seconds);
+            ep.end(TerminalSource::Benchmark, "invalid_action", format!("malformed action: {e}"));
+        }
+    }
+}
+
+/// The current view: its step, pose and (while running) the engine's depth.
+type CurrentView = (usize, Pose, Option<Arc<Vec<f32>>>);
+
+/// An RGB view: its step, width, height and RGB8 pixels (row-major).
+pub type RgbView = (usize, u32, u32, Vec<[u8; 3]>);
+
+/// Server settings.
+#[derive(Debug, Clone)]
+pub struct Limits {
+    /// Wait for each action after an observation.
+    pub action_timeout: Duration,
+    /// Wait for the first action after the create response.
+    pub start_timeout: Duration,
+}
+
+/// The server's shared state.
+pub struct AppState {
+    /// The splits.
+    pub pool: Pool,
+    /// Prepared scenes.
+    pub scenes: SceneCache,
+    /// Persistence.
+    pub db: Db,
+    /// Bearer tokens (none: open server).
+    pub tokens: Option<Tokens>,
+    /// Time limits.
+    pub limits: Limits,
+    /// Engine work (starting episodes, applying actions, rendering on request) waits here for
+    /// one of as many permits as there are cores, first come first served, so that many clients
+    /// queue rather than slow every step down together.
+    pub engine_gate: tokio::sync::Semaphore,
+    candidate_sets: BTreeMap<String, Arc<Vec<Pose>>>,
+    spaces: BTreeMap<String, ViewSpace>,
+    episodes: Mutex<HashMap<String, Arc<Slot>>>,
+}
+
+/// A fresh episode id: `e-` and 16 random hex digits.
+fn new_id() -> String {
+    format!("e-{:016x}", rand::random::<u64>())
+}
+
+fn internal(context: &str, e: impl std::fmt::Display) -> ApiError {
+    eprintln!("objview serve: {context}: {e}");
+    ApiError::Internal(format!("{context} failed (see the server log)"))
+}
+
+impl AppState {
+    /// The state over `pool`, `db` and `tokens`; finishes (replays) the episodes the database
+    /// holds as running, ending them `exception` / `interrupted`.
+    pub fn new(
+        pool: Pool,
+        scenes: SceneCache,
+        db: Db,
+        tokens: Option<Tokens>,
+        limits: Limits,
+    ) -> Result<AppState, ServerError> {
+        let mut candidate_sets = BTreeMap::new();
+        for name in CANDIDATE_SETS {
+            let vs = ViewSet::resolve(name).map_err(|e| ServerError::Config(e.to_string()))?;
+            candidate_sets.insert(name.to_string(), Arc::new(vs.poses(objview_geom::pose::VIEW_RADIUS)));
+        }
+        let spaces =
+            VIEW_SPACES.iter().filter_map(|n| ViewSpace::builtin(n).map(|s| (n.to_string(), s))).collect();
+        let state = AppState {
+            pool,
+            scenes,
+            db,
+            tokens,
+            limits,
+            engine_gate: tokio::sync::Semaphore::new(
+                std::thread::available_parallelism().map_or(1, |n| n.get()),
+            ),
+            candidate_sets,
+            spaces,
+            episodes: Mutex::default(),
+        };
+        state.recover()?;
+        Ok(state)
+    }
+
+    /// The poses of a candidate set (radius 3, look-at 0).
+    pub fn candidate_set(&self, name: &str) -> Option<&Arc<Vec<Pose>>> {
+        self.candidate_sets.get(name)
+    }
+
+    fn recover(&self) -> Result<(), ServerError> {
+        let db_err = |e: crate::db::DbError| ServerError::Db {
+            path: self.db.path().display().to_string(),
+            reason: e.to_string(),
+        };
+        for row in self.db.episodes().map_err(db_err)? {
+            let bad = |reason: String| ServerError::Recovery { id: row.id.clone(), reason };
+            let spec: CreateSpec = serde_json::from_str(&row.request).map_err(|e| bad(e.to_string()))?;
+            let live = if row.state == "running" {
+                if self.pool.split(&spec.split).is_none() {
+                    eprintln!(
+                        "objview serve: episode {} was running on split {} that this server does not have; \
+                         it stays unfinished",
+                        row.id, spec.split
+                    );
+                    continue;
+                }
+                let (mut ep, record) = match self.prepare(&spec) {
+                    Ok(x) => x,
+                    Err(e) => {
+                        eprintln!(
+                            "objview serve: episode {} cannot be replayed ({e}); it stays unfinished",
+                            row.id
+                        );
+                        continue;
+                    }
+                };
+                let actions = self.db.actions(&row.id).map_err(db_err)?;
+                for a in &actions {
+                    let v: Value = serde_json::from_str(&a.action).map_err(|e| bad(e.to_string()))?;
+                    apply_raw(&mut ep, &v, a.planner_seconds);
+                }
+                ep.end(
+                    TerminalSource::Exception,
+                    "interrupted",
+                    format!(
+                        "the server stopped while the episode was running; {} stored actions replayed",
+                        actions.len()
+                    ),
+                );
+                let res = ep.finish(record);
+                let line = objview_dataset::to_line(&res).trim_end().to_string();
+                self.db.record_end(&row.id, &row.owner, &row.method, &line).map_err(db_err)?;
+                eprintln!(
+                    "objview serve: episode {} ended as interrupted ({} views)",
+                    row.id,
+                    res.steps.len()
+                );
+                Live::Finished(Some(Box::new(Finished::from_line(&line).map_err(|e| bad(e.to_string()))?)))
+            } else {
+                Live::Finished(None)
+            };
+            let slot = Slot {
+                id: row.id.clone(),
+                owner: row.owner.clone(),
+                spec,
+                in_flight: AtomicUsize::new(0),
+                live: Mutex::new(live),
+            };
+            lock(&self.episodes).insert(row.id.clone(), Arc::new(slot));
+        }
+        Ok(())
+    }
+
+    /// Builds the episode of `spec` (the scene may take seconds the first time) and the settings
+    /// record of its result.
+    fn prepare(&self, spec: &CreateSpec) -> Result<(Episode, Value), ApiError> {
+        let split = self
+            .pool
+            .split(&spec.split)
+            .ok_or_else(|| ApiError::InvalidRequest(format!("unknown split {:?}", spec.split)))?;
+        let obj = split.object(&ObjectKey::Uid(spec.object.clone())).ok_or_else(|| {
+            ApiError::NotFound(format!("split {} has no object {:?}", spec.split, spec.object))
+        })?;
+        let scene =
+            self.scenes.get(obj, &spec.view_space).map_err(|e| internal("preparing the object", e))?;
+        let settings = EpisodeSettings {
+            candidates: spec.candidate_set.clone(),
+            record_timings: spec.record_timings,
+            ..Default::default()
+        };
+        let candidates = self.candidate_sets.get(&spec.candidate_set).ok_or_else(|| {
+            ApiError::InvalidRequest(format!("unknown candidate set {:?}", spec.candidate_set))
+        })?;
+        let budget = spec.budget();
+        let start_pose = objview_views::start_pose(settings.view_radius);
+        let record = RunRecord {
+            planner: &spec.method,
+            planner_params: spec.params.clone(),
+            view_space: &spec.view_space,
+            space: &scene.space,
+            budget,
+            seed: spec.seed,
+            candidates: &spec.candidate_set,
+            candidate_count: candidates.len(),
+            start_pose,
+            normalize: self.scenes.normalize(),
+            settings: &settings,
+        }
+        .to_json();
+        let method = MethodInfo {
+            name: spec.method.clone(),
+            family: spec.family.clone(),
+            mode: spec.mode(),
+            params: spec.params.clone(),
+        };
+        let ep = Episode::start(scene, settings, method, budget, spec.seed, start_pose)
+            .map_err(|e| internal("starting the episode", e))?;
+        Ok((ep, record))
+    }
+
+    /// The episode `id` if `owner` may see it.
+    pub fn slot(&self, owner: &str, id: &str) -> Result<Arc<Slot>, ApiError> {
+        lock(&self.episodes)
+            .get(id)
+            .filter(|s| s.owner == owner)
+            .cloned()
+            .ok_or_else(|| ApiError::NotFound(format!("no episode {id:?}")))
+    }
+
+    /// `POST /v1/episodes`: starts an episode, takes its start view, stores it; the 201 body.
+    pub fn create(&self, owner: &str, spec: CreateSpec) -> Result<Value, ApiError> {
+        let (ep, record) = self.prepare(&spec)?;
+        let id = new_id();
+        let row = EpisodeRow {
+            id: id.clone(),
+            owner: owner.to_string(),
+            split: spec.split.clone(),
+            uid: spec.object.clone(),
+            method: spec.method.clone(),
+            request: serde_json::to_string(&spec).map_err(|e| internal("storing the episode", e))?,
+            state: "running".into(),
+        };
+        self.db.insert_episode(&row).map_err(|e| internal("storing the episode", e))?;
+        let budget = spec.budget();
+        let start = ep.history()[0];
+        let intr = ep.scene().intrinsics;
+        let now = Instant::now();
+        let running = Running {
+            ep,
+            record,
+            obs_at: now,
+            deadline: now + self.limits.start_timeout,
+            actions: Vec::new(),
+        };
+        let body = json!({
+            "episode_id": id,
+            "object_id": spec.object,
+            "split": spec.split,
+            "view_space": spec.view_space,
+            "budget": spec.budget,
+            "seed": objview_episode::episode_seed(spec.seed, &spec.object, &spec.view_space, budget),
+            "candidate_set": spec.candidate_set,
+            "start_pose": start.to_array(),
+            "intrinsics": {
+                "width": intr.width, "height": intr.height, "fx": intr.fx, "fy": intr.fy,
+                "cx": intr.cx, "cy": intr.cy, "znear": intr.znear, "zfar": intr.zfar,
+            },
+            "action_timeout_s": self.limits.action_timeout.as_secs_f64(),
+            "observation": running.obs(),
+        });
+        let slot = Slot {
+            id: id.clone(),
+            owner: owner.to_string(),
+            spec,
+            in_flight: AtomicUsize::new(0),
+            live: Mutex::new(Live::Running(Box::new(running))),
+        };
+        lock(&self.episodes).insert(id, Arc::new(slot));
+        Ok(body)
+    }
+
+    /// Ends a running episode without an action (time-out, abort) and stores its result.
+    fn end_running(
+        &self,
+        slot: &Slot,
+        live: &mut Live,
+        source: TerminalSource,
+        reason: &str,
+        detail: String,
+    ) -> Result<(), ApiError> {
+        if let Live::Running(r) = live {
+            r.ep.end(source, reason, detail);
+        }
+        let line = self.finish(slot, live)?;
+        self.db
+            .record_end(&slot.id, &slot.owner, &slot.spec.method, &line)
+            .map_err(|e| internal("storing the result", e))
+    }
+
+    /// Turns an ended running episode into a finished one; returns its result line.
+    fn finish(&self, _slot: &Slot, live: &mut Live) -> Result<String, ApiError> {
+        let Live::Running(r) = std::mem::replace(live, Live::Finished(None)) else {
+            return Err(ApiError::Internal("the episode had already finished".into()));
+        };
+        let r = *r;
+        let res = r.ep.finish(r.record);
+        let line = objview_dataset::to_line(&res).trim_end().to_string();
+        *live = Live::Finished(Some(Box::new(Finished {
+            history: res.visited_poses.clone(),
+            terminal: TerminalInfo {
+                source: source_name(res.terminal_source),
+                reason: res.terminal_reason.clone(),
+                detail: res.terminal_detail.clone(),
+            },
+        })));
+        Ok(line)
+    }
+
+    /// Ends the episode with `exception` / `timeout` if its client is late; whether it did.
+    fn expire(&self, slot: &Slot, live: &mut Live, now: Instant) -> Result<bool, ApiError> {
+        if slot.in_flight.load(Ordering::SeqCst) > 0 {
+            return Ok(false);
+        }
+        self.expire_at(slot, live, now)
+    }
+
+    /// [`AppState::expire`] judged at `at` whatever is in flight.
+    fn expire_at(&self, slot: &Slot, live: &mut Live, at: Instant) -> Result<bool, ApiError> {
+        let Live::Running(r) = live else { return Ok(false) };
+        if at < r.deadline {
+            return Ok(false);
+        }
+        let (limit, what) = if r.actions.is_empty() {
+            (self.limits.start_timeout, "the create response")
+        } else {
+            (self.limits.action_timeout, "the last observation")
+        };
+        let detail = format!("no action within {} s of {what} (step {})", limit.as_secs_f64(), r.step());
+        self.end_running(slot, live, TerminalSource::Exception, "timeout", detail)?;
+        Ok(true)
+    }
+
+    fn finished_summary(&self, slot: &Slot, live: &mut Live) -> Result<Finished, ApiError> {
+        if let Live::Finished(f) = live {
+            if f.is_none() {
+                let line =
+                    self.db.result(&slot.id).map_err(|e| internal("reading the result", e))?.ok_or_else(
+                        || ApiError::Internal("the finished episode has no stored result".into()),
+                    )?;
+                *f = Some(Box::new(Finished::from_line(&line)?));
+            }
+            if let Some(f) = f {
+                return Ok((**f).clone());
+            }
+        }
+        Err(ApiError::Internal("the episode is running".into()))
+    }
+
+    /// `POST /v1/episodes/{id}/actions`: applies `action` if `step` is current; the OBS after it.
+    /// `received` is when the action arrived (the end of its planning time).
+    pub fn act(&self, slot: &Slot, step: u64, action: &Value, received: Instant) -> Result<Value, ApiError> {
+        let mut live = lock(&slot.live);
+        if self.expire_at(slot, &mut live, received)? {
+            return Err(ApiError::EpisodeFinished(format!(
+                "episode {} ended: no action came within the time limit",
+                slot.id
+            )));
+        }
+        let Live::Running(r) = &mut *live else {
+            return Err(ApiError::EpisodeFinished(format!("episode {} has ended", slot.id)));
+        };
+        let current = r.step();
+        if step != current as u64 {
+            return Err(ApiError::StaleStep(format!(
+                "`step` is {step}, the current observation is step {current}"
+            )));
+        }
+        let secs = received.saturating_duration_since(r.obs_at).as_secs_f64();
+        apply_raw(&mut r.ep, action, secs);
+        r.actions.push((action.clone(), secs));
+        let row = ActionRow { step: current, action: action.to_string(), planner_seconds: secs };
+        let seq = r.actions.len();
+        if r.ep.terminal().is_some() {
+            let line = self.finish(slot, &mut live)?;
+            self.db
+                .record_action(&slot.id, seq, &row, Some((&slot.owner, &slot.spec.method, &line)))
+                .map_err(|e| internal("storing the action", e))?;
+            Ok(self.finished_summary(slot, &mut live)?.obs())
+        } else {
+            self.db
+                .record_action(&slot.id, seq, &row, None)
+                .map_err(|e| internal("storing the action", e))?;
+            let now = Instant::now();
+            r.obs_at = now;
+            r.deadline = now + self.limits.action_timeout;
+            Ok(r.obs())
+        }
+    }
+
+    /// `POST /v1/episodes/{id}/abort`: the client's planner failed; the episode ends with
+    /// `exception` / `planner_error`, its views scored.
+    pub fn abort(&self, slot: &Slot, detail: String) -> Result<Value, ApiError> {
+        let mut live = lock(&slot.live);
+        if self.expire(slot, &mut live, Instant::now())? || matches!(*live, Live::Finished(_)) {
+            return Err(ApiError::EpisodeFinished(format!("episode {} has ended", slot.id)));
+        }
+        self.end_running(slot, &mut live, TerminalSource::Exception, "planner_error", detail)?;
+        Ok(self.finished_summary(slot, &mut live)?.obs())
+    }
+
+    /// `GET /v1/episodes/{id}/observation`: OBS of the current view (409 after the end).
+    pub fn observation(&self, slot: &Slot) -> Result<Value, ApiError> {
+        let mut live = lock(&slot.live);
+        self.expire(slot, &mut live, Instant::now())?;
+        match &*live {
+            Live::Running(r) => Ok(r.obs()),
+            Live::Finished(_) => Err(ApiError::EpisodeFinished(format!("episode {} has ended", slot.id))),
+        }
+    }
+
+    /// The current (or, after the end, last) view's step and pose; 409 `stale_step` when
+    /// `want` names another step.
+    fn current_view(&self, slot: &Slot, live: &mut Live, want: Option<u64>) -> Result<CurrentView, ApiError> {
+        self.expire(slot, live, Instant::now())?;
+        let (step, pose, depth) = match live {
+            Live::Running(r) => {
+                let obs = r.ep.observation();
+                (obs.step, obs.pose, Some(obs.depth))
+            }
+            Live::Finished(_) => {
+                let f = self.finished_summary(slot, live)?;
+                let last = f.history.last().copied().ok_or_else(|| ApiError::Internal("no views".into()))?;
+                let pose = Pose::from_array(last).ok_or_else(|| ApiError::Internal("stored pose".into()))?;
+                (f.history.len() - 1, pose, None)
+            }
+        };
+        if let Some(w) = want {
+            if w != step as u64 {
+                return Err(ApiError::StaleStep(format!(
+                    "`step` is {w}, the current observation is step {step}"
+                )));
+            }
+        }
+        Ok((step, pose, depth))
+    }
+
+    fn render(
+        &self,
+        slot: &Slot,
+        pose: Pose,
+    ) -> Result<(Arc<objview_episode::Scene>, objview_render::Frame), ApiError> {
+        let split = self
+            .pool
+            .split(&slot.spec.split)
+            .ok_or_else(|| ApiError::Internal("the split is gone".into()))?;
+        let obj = split
+            .object(&ObjectKey::Uid(slot.spec.object.clone()))
+            .ok_or_else(|| ApiError::Internal("the object is gone".into()))?;
+        let scene =
+            self.scenes.get(obj, &slot.spec.view_space).map_err(|e| internal("preparing the object", e))?;
+        let frame = objview_render::render(&scene.mesh, &Camera::new(pose, scene.intrinsics));
+        Ok((scene, frame))
+    }
+
+    /// `GET …/observation/depth.npy`: the step and the depth (512 × 512, row-major).
+    pub fn depth(&self, slot: &Slot, want: Option<u64>) -> Result<(usize, Arc<Vec<f32>>), ApiError> {
+        let mut live = lock(&slot.live);
+        let (step, pose, depth) = self.current_view(slot, &mut live, want)?;
+        drop(live);
+        match depth {
+            Some(d) => Ok((step, d)),
+            None => Ok((step, Arc::new(self.render(slot, pose)?.1.depth))),
+        }
+    }
+
+    /// `GET …/observation/rgb.png`: the step, the image size and its RGB8 pixels.
+    pub fn rgb(&self, slot: &Slot, want: Option<u64>) -> Result<RgbView, ApiError> {
+        let mut live = lock(&slot.live);
+        let (step, pose, _) = self.current_view(slot, &mut live, want)?;
+        drop(live);
+        let (scene, frame) = self.render(slot, pose)?;
+        let rgb = objview_render::rgb::render_rgb(&scene.mesh, &frame);
+        Ok((step, frame.width(), frame.height(), rgb))
+    }
+
+    /// `POST …/feasible`: feasibility of each pose in the episode's view space.
+    pub fn feasible(&self, slot: &Slot, poses: &[Pose]) -> Result<Vec<bool>, ApiError> {
+        let space = self
+            .spaces
+            .get(&slot.spec.view_space)
+            .ok_or_else(|| ApiError::Internal("unknown view space".into()))?;
+        Ok(space.feasible_mask(poses))
+    }
+
+    /// `GET /v1/episodes/{id}`.
+    pub fn info(&self, slot: &Slot) -> Result<Value, ApiError> {
+        let public = self.pool.split(&slot.spec.split).is_some_and(|s| s.public);
+        let mut v = json!({
+            "episode_id": slot.id,
+            "object_id": slot.spec.object,
+            "split": slot.spec.split,
+            "view_space": slot.spec.view_space,
+            "budget": slot.spec.budget,
+            "method": slot.spec.method,
+        });
+        {
+            let mut live = lock(&slot.live);
+            self.expire(slot, &mut live, Instant::now())?;
+            let m = v.as_object_mut().expect("an object");
+            match &mut *live {
+                Live::Running(r) => {
+                    let history: Vec<[f64; 7]> = r.ep.history().iter().map(|p| p.to_array()).collect();
+                    m.insert("state".into(), json!("running"));
+                    m.insert("step".into(), json!(r.step()));
+                    m.insert("views".into(), json!(history.len()));
+                    m.insert("history".into(), json!(history));
+                    m.insert("terminal".into(), Value::Null);
+                    if public {
+                        let metrics =
+                            r.ep.last_step()
+                                .map(|s| serde_json::to_value(&s.metrics).unwrap_or(Value::Null))
+                                .unwrap_or(Value::Null);
+                        m.insert("metrics".into(), metrics);
+                    }
+                }
+                Live::Finished(_) => {
+                    let f = self.finished_summary(slot, &mut live)?;
+                    m.insert("state".into(), json!("finished"));
+                    m.insert("step".into(), json!(f.history.len() - 1));
+                    m.insert("views".into(), json!(f.history.len()));
+                    m.insert("history".into(), json!(f.history));
+                    m.insert("terminal".into(), json!(f.terminal));
+                }
+            }
+        }
+        Ok(v)
+    }
+
+    /// `GET /v1/episodes/{id}/result`: the result line (409 while running).
+    pub fn result(&self, slot: &Slot) -> Result<String, ApiError> {
+        let mut live = lock(&slot.live);
+        self.expire(slot, &mut live, Instant::now())?;
+        if matches!(*live, Live::Running(_)) {
+            return Err(ApiError::EpisodeRunning(format!("episode {} is still running", slot.id)));
+        }
+        drop(live);
+        self.db
+            .result(&slot.id)
+            .map_err(|e| internal("reading the result", e))?
+            .ok_or_else(|| ApiError::Internal("the finished episode has no stored result".into()))
+    }
+
+    /// Ends every episode whose client is late (the background sweeper calls this).
+    pub fn sweep(&self) {
+        let now = Instant::now();
+        let slots: Vec<Arc<Slot>> = lock(&self.episodes).values().cloned().collect();
+        for slot in slots {
+            // A busy episode is being acted on; its own request checks the deadline.
+            let Ok(mut live) = slot.live.try_lock() else { continue };
+            if let Err(e) = self.expire(&slot, &mut live, now) {
+                eprintln!("objview serve: ending episode {} at its time limit: {e}", slot.id);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn method_names() {
+        for ok in ["my-nbv", "rse", "a.b_c+d-1", &"x".repeat(100)] {
+            assert!(valid_method_name(ok), "{ok}");
+        }
+        for bad in ["", "a/b", "a b", "é", &"x".repeat(101)] {
+            assert!(!valid_method_name(bad), "{bad}");
+        }
+    }
+
+    #[test]
+    fn observations_show_only_step_pose_and_terminal() {
+        let t =
+            TerminalInfo { source: "benchmark".into(), reason: "invalid_action".into(), detail: "x".into() };
+        let v = obs_json(3, Some([3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]), Some(&t));
+        assert_eq!(
+            v,
+            json!({"step": 3, "pose": [3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], "done": true,
+                   "terminal": {"source": "benchmark", "reason": "invalid_action", "detail": "x"}})
+        );
+        assert_eq!(obs_json(0, None, None)["done"], false);
+    }
+}

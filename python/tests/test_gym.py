@@ -1,0 +1,103 @@
+"""The Gymnasium environment: check_env, a full episode, continuous poses, object choice."""
+
+from __future__ import annotations
+
+import warnings
+
+import gymnasium
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+from conftest import TOKEN
+from objview.gym import ObjViewEnv
+
+
+def make(server, **kw):
+    kw.setdefault("budget", 5)
+    kw.setdefault("candidate_set", "tammes-128")
+    return ObjViewEnv(server.url, "tiny", token=TOKEN, **kw)
+
+
+def test_check_env_passes(server):
+    env = make(server, method="t-gym-check")
+    with warnings.catch_warnings():
+        # Expected warnings only: the unbounded Boxes (depth ≥ 0, pose) and the missing spec
+        # of an environment built without gymnasium.make (no alternative render modes).
+        warnings.simplefilter("ignore", UserWarning)
+        check_env(env)
+    env.close()
+
+
+def test_spaces_and_a_full_episode(server):
+    env = make(server, method="t-gym", view_space="hemi")
+    assert env.action_space == gymnasium.spaces.Discrete(129)
+    assert env.stop_action == 128
+    obs, info = env.reset(seed=5)
+    assert obs in env.observation_space
+    assert obs["depth"].shape == (512, 512) and obs["depth"].dtype == np.float32
+    assert obs["pose"].shape == (7,) and obs["mask"].shape == (128,)
+    assert info == {"step": 0, "object_id": "cube"}
+    # The mask is the view space's feasibility of the candidates (hemi: z ≥ 0).
+    z = env.candidates[:, 2]
+    clear = np.abs(z) > 1e-6
+    np.testing.assert_array_equal(obs["mask"][clear].astype(bool), z[clear] >= 0)
+    assert 0.0 < obs["depth"][256, 256] < 3.0
+
+    order = np.flatnonzero(obs["mask"])
+    steps = 0
+    terminated = False
+    while not terminated:
+        action = int(order[steps % len(order)]) if steps < 3 else env.stop_action
+        obs, reward, terminated, truncated, info = env.step(action)
+        steps += 1
+        assert reward == 0.0 and truncated is False
+        assert obs in env.observation_space
+        if not terminated:
+            assert info["step"] == steps and "result" not in info
+            np.testing.assert_array_equal(obs["pose"], env.candidates[action])
+    assert steps == 4
+    assert info["terminal"]["reason"] == "plan_end"
+    res = info["result"]
+    assert res["uid"] == "cube" and res["method"] == "t-gym" and res["family"] == "learned"
+    assert res["view_space"] == "hemi" and len(res["visited_poses"]) == 4
+    assert res["checkpoints"]["terminal"]["views"] == 4
+    env.close()
+
+
+def test_continuous_pose_actions_objects_and_reward_hook(server):
+    calls = []
+
+    def reward_fn(env, obs, info):
+        calls.append(info["step"])
+        return float(info["result"]["checkpoints"]["terminal"]["sc"]["0.02"]) if "result" in info else 0.0
+
+    env = make(server, method="t-gym", reward_fn=reward_fn, objects=["cone", 0])
+    _, info = env.reset(seed=1)
+    assert info["object_id"] == "cone"
+    _, info = env.reset()
+    assert info["object_id"] == "cube"
+    _, info = env.reset()
+    assert info["object_id"] == "cone"  # the cycle wraps
+    _, info = env.reset(options={"object": "cube"})
+    assert info["object_id"] == "cube"
+
+    pose = np.array([0.0, -3.0, 0.5, 0.0, 0.0, 0.1, 0.3])
+    obs, r, term, trunc, info = env.step(pose)
+    assert not term and info["step"] == 1 and r == 0.0
+    np.testing.assert_array_equal(obs["pose"], pose)
+    obs, r, term, trunc, info = env.step(env.stop_action)
+    assert term and 0.0 < r <= 1.0 and calls == [1, 1]
+    with pytest.raises(ValueError):
+        env.step(env.stop_action + 1)
+    env.close()
+
+
+def test_gymnasium_make(server):
+    env = gymnasium.make("objview/ObjView-v0", url=server.url, split="tiny", token=TOKEN,
+                         budget=5, candidate_set="tammes-128", method="t-gym")
+    obs, info = env.reset(seed=0)
+    assert obs["depth"].shape == (512, 512)
+    obs, r, term, trunc, info = env.step(env.unwrapped.stop_action)
+    assert term and info["result"]["terminal_reason"] == "plan_end"
+    env.close()

@@ -23,8 +23,9 @@ pub struct Args {
     /// it the server is open.
     #[arg(long)]
     pub tokens: Option<PathBuf>,
-    /// A split (id) whose running episodes show their metrics (repeatable).
-    #[arg(long)]
+    /// A split (id) whose running episodes show their metrics (repeatable); a bare `--public`
+    /// makes every split of the pool public (a development server).
+    #[arg(long, num_args = 0..=1, default_missing_value = "*")]
     pub public: Vec<String>,
     /// Seconds a client has for each action after an observation.
     #[arg(long, default_value_t = 100.0)]

@@ -57,8 +57,8 @@ pub struct Pool {
 
 impl Pool {
     /// Reads the split files; `public` names the splits whose metrics may be shown while an
-    /// episode runs. Two files with the same stem, or a `--public` id that names no split, are
-    /// errors.
+    /// episode runs (`*`: all of them). Two files with the same stem, or a `--public` id that
+    /// names no split, are errors.
     pub fn load(files: &[PathBuf], public: &[String]) -> Result<Pool, ServerError> {
         let mut splits: Vec<Split> = Vec::new();
         for f in files {
@@ -76,6 +76,11 @@ impl Pool {
             splits.push(Split { id, public: false, objects });
         }
         for p in public {
+            if p == "*" {
+                // A bare `--public`: every split.
+                splits.iter_mut().for_each(|s| s.public = true);
+                continue;
+            }
             let Some(s) = splits.iter_mut().find(|s| &s.id == p) else {
                 return Err(ServerError::Config(format!(
                     "--public {p}: no such split (splits: {})",
@@ -153,5 +158,30 @@ impl SceneCache {
         let scene = Arc::new(scene);
         *slot = Some(scene.clone());
         Ok(scene)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn public_marks_named_splits_or_all() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut files = Vec::new();
+        for name in ["alpha", "beta"] {
+            let f = dir.path().join(format!("{name}.json"));
+            std::fs::write(&f, format!(r#"[{{"uid": "{name}-obj", "mesh": "{name}.obj"}}]"#)).unwrap();
+            files.push(f);
+        }
+        let flags = |p: &Pool| p.splits.iter().map(|s| (s.id.clone(), s.public)).collect::<Vec<_>>();
+        let none = Pool::load(&files, &[]).unwrap();
+        assert_eq!(flags(&none), vec![("alpha".into(), false), ("beta".into(), false)]);
+        let one = Pool::load(&files, &["beta".into()]).unwrap();
+        assert_eq!(flags(&one), vec![("alpha".into(), false), ("beta".into(), true)]);
+        let all = Pool::load(&files, &["*".into()]).unwrap();
+        assert_eq!(flags(&all), vec![("alpha".into(), true), ("beta".into(), true)]);
+        let err = Pool::load(&files, &["gamma".into()]).unwrap_err().to_string();
+        assert!(err.contains("--public gamma: no such split"), "{err}");
     }
 }

@@ -372,6 +372,8 @@ class Observation:
         self.pose = np.asarray(pose if pose is not None else [np.nan] * 7, dtype=np.float64)
         self.done = bool(meta.get("done", False))
         self.terminal = meta.get("terminal")
+        # Camera intrinsics of the view (width, height, fx, fy, cx, cy, znear, zfar).
+        self.intrinsics: Dict[str, Any] = meta.get("intrinsics") or episode.intrinsics
         self.meta = meta
         self._depth: Optional[np.ndarray] = None
         self._rgb: Optional[np.ndarray] = None

@@ -88,6 +88,7 @@ def test_episode_start_view_depth_and_rgb(server, client, pool, objview_bin, tmp
 
     obs = ep.observation()
     assert obs.step == 0 and not obs.done and obs.terminal is None and ep.step == 0
+    assert obs.meta["intrinsics"] == k and obs.intrinsics == k  # every observation carries them
     d = obs.depth
     assert d.shape == (512, 512) and d.dtype == np.float32
     # The unit cube's corner faces the start view: the centre ray hits it at depth ≈ 3 − 1.

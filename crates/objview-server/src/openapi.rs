@@ -67,7 +67,7 @@ pub fn document() -> Value {
                     "source": {"type": "string", "enum": ["algorithm_stop", "benchmark", "exception"]},
                     "reason": {"type": "string"}, "detail": {"type": "string"}}},
                 "Observation": {"type": "object", "required": ["step", "pose", "done", "terminal"], "properties": {
-                    "step": {"type": "integer"}, "pose": pose, "done": {"type": "boolean"},
+                    "step": {"type": "integer"}, "pose": pose, "intrinsics": {"type": "object"}, "done": {"type": "boolean"},
                     "terminal": {"$ref": "#/components/schemas/Terminal"}}},
                 "Action": {"oneOf": [
                     {"type": "object", "required": ["type", "pose"], "properties": {

@@ -317,9 +317,17 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-/// OBS: `{"step", "pose", "done", "terminal"}`.
+/// OBS: `{"step", "pose", "intrinsics", "done", "terminal"}`.
 fn obs_json(step: usize, pose: Option<[f64; 7]>, terminal: Option<&TerminalInfo>) -> Value {
-    json!({"step": step, "pose": pose, "done": terminal.is_some(), "terminal": terminal})
+    json!({"step": step, "pose": pose, "intrinsics": intrinsics_json(),
+           "done": terminal.is_some(), "terminal": terminal})
+}
+
+/// The camera intrinsics of every observation (SPEC §2; every scene uses them).
+fn intrinsics_json() -> Value {
+    let i = objview_render::Intrinsics::default();
+    json!({"width": i.width, "height": i.height, "fx": i.fx, "fy": i.fy, "cx": i.cx, "cy": i.cy,
+           "znear": i.znear, "zfar": i.zfar})
 }
 
 /// Applies one raw action as received: an `action` that is not a well-formed move or stop ends
@@ -556,7 +564,6 @@ impl AppState {
         self.db.insert_episode(&row).map_err(|e| internal("storing the episode", e))?;
         let budget = spec.budget();
         let start = ep.history()[0];
-        let intr = ep.scene().intrinsics;
         let now = Instant::now();
         let running = Running {
             ep,
@@ -574,10 +581,7 @@ impl AppState {
             "seed": objview_episode::episode_seed(spec.seed, &spec.object, &spec.view_space, budget),
             "candidate_set": spec.candidate_set,
             "start_pose": start.to_array(),
-            "intrinsics": {
-                "width": intr.width, "height": intr.height, "fx": intr.fx, "fy": intr.fy,
-                "cx": intr.cx, "cy": intr.cy, "znear": intr.znear, "zfar": intr.zfar,
-            },
+            "intrinsics": intrinsics_json(),
             "action_timeout_s": self.limits.action_timeout.as_secs_f64(),
             "observation": running.obs(),
         });
@@ -892,13 +896,14 @@ mod tests {
     }
 
     #[test]
-    fn observations_show_only_step_pose_and_terminal() {
+    fn observations_show_only_step_pose_intrinsics_and_terminal() {
         let t =
             TerminalInfo { source: "benchmark".into(), reason: "invalid_action".into(), detail: "x".into() };
         let v = obs_json(3, Some([3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]), Some(&t));
         assert_eq!(
             v,
-            json!({"step": 3, "pose": [3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], "done": true,
+            json!({"step": 3, "pose": [3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], "intrinsics": intrinsics_json(),
+                   "done": true,
                    "terminal": {"source": "benchmark", "reason": "invalid_action", "detail": "x"}})
         );
         assert_eq!(obs_json(0, None, None)["done"], false);

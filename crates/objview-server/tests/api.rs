@@ -175,7 +175,8 @@ fn create_validates_its_request() {
     );
     assert_eq!(
         created["observation"],
-        json!({"step": 0, "pose": created["start_pose"], "done": false, "terminal": null})
+        json!({"step": 0, "pose": created["start_pose"], "intrinsics": created["intrinsics"], "done": false,
+               "terminal": null})
     );
     // An object that cannot be loaded: 500 without its path.
     let r = post(

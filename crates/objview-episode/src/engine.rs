@@ -246,6 +246,7 @@ impl Episode {
             oracle: oracle.then(|| OracleAccess {
                 mesh: self.scene.mesh.clone(),
                 reference: Arc::new(self.reference.points().to_vec()),
+                reference_targets: Arc::new(self.reference.clone()),
             }),
         }
     }

@@ -172,8 +172,12 @@ pub struct Observation {
 pub struct OracleAccess {
     /// The hidden (normalized) mesh.
     pub mesh: Arc<Mesh>,
-    /// The observable reference cloud of (object, view space) (SPEC §5).
+    /// The observable reference cloud of (object, view space) (SPEC §5), in the environment's
+    /// order: point i is bit i of [`Environment::oracle_covered`].
     pub reference: Arc<Vec<[f64; 3]>>,
+    /// The same points with the environment's spatial index (for coverage queries such as
+    /// [`crate::coverage::Targets::mark_within`], whose bit order is this order).
+    pub reference_targets: Arc<crate::coverage::Targets>,
 }
 
 /// What a planner learns when an episode starts.

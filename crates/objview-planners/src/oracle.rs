@@ -10,7 +10,6 @@
 
 use std::time::Instant;
 
-use objview_episode::coverage::Targets;
 use objview_episode::fusion::FusedCloud;
 use objview_episode::{
     scene_domain, Action, Environment, EpisodeContext, ExecutionMode, Family, Observation, Planner,
@@ -73,9 +72,11 @@ impl Planner for Oracle {
         self.candidates = ctx.candidates.to_vec();
         self.feasible = env.feasible_mask(&self.candidates);
         self.taken = vec![false; self.candidates.len()];
+        // The environment's own index of the reference: bit i of a candidate's coverage is
+        // reference point i of `env.oracle_covered()`.
+        let targets = &oracle.reference_targets;
+        // The per-candidate clouds are fused at the oracle's own voxel size.
         let domain = scene_domain(&oracle.mesh, &oracle.reference, self.voxel);
-        let targets = Targets::new(domain.clone(), &oracle.reference, self.tau)
-            .map_err(|e| PlannerError(format!("oracle: {e}")))?;
         let words = targets.len().div_ceil(64);
         let mut renderer = Renderer::new();
         self.covers = Vec::with_capacity(self.candidates.len());

@@ -42,6 +42,10 @@ pub struct Args {
     /// `unit` (raw assets) or `none` (already normalized, checked), as `objview run`.
     #[arg(long, default_value = "unit")]
     pub normalize: Normalization,
+    /// Prepared scenes (mesh, ground truth, observable reference, indexes) kept in memory; the
+    /// least recently used is dropped first.
+    #[arg(long, default_value_t = objview_server::pool::DEFAULT_SCENE_CACHE)]
+    pub scene_cache: usize,
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -58,6 +62,7 @@ pub fn run(a: Args) -> Result<()> {
             Some(a.cache_dir.unwrap_or_else(crate::run::default_cache_dir))
         },
         normalize: a.normalize,
+        scene_cache: a.scene_cache,
     };
     objview_server::run(&cfg, &a.addr, |addr, state| {
         let splits: Vec<String> = state

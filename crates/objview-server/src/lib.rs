@@ -55,6 +55,8 @@ pub struct ServerConfig {
     pub cache_dir: Option<PathBuf>,
     /// How meshes are normalized (`unit` for raw assets, like `objview run`).
     pub normalize: Normalization,
+    /// Prepared scenes kept in memory (least recently used dropped first).
+    pub scene_cache: usize,
 }
 
 impl Default for ServerConfig {
@@ -68,6 +70,7 @@ impl Default for ServerConfig {
             start_timeout_s: 300.0,
             cache_dir: None,
             normalize: Normalization::Unit,
+            scene_cache: pool::DEFAULT_SCENE_CACHE,
         }
     }
 }
@@ -93,7 +96,7 @@ pub fn build_state(cfg: &ServerConfig) -> Result<Arc<AppState>, ServerError> {
     let pool = pool::Pool::load(&cfg.pool, &cfg.public)?;
     let tokens = cfg.tokens.as_deref().map(auth::Tokens::load).transpose()?;
     let db = db::Db::open(&cfg.db)?;
-    let scenes = pool::SceneCache::new(cfg.normalize, cfg.cache_dir.clone());
+    let scenes = pool::SceneCache::new(cfg.normalize, cfg.cache_dir.clone()).with_capacity(cfg.scene_cache);
     Ok(Arc::new(AppState::new(pool, scenes, db, tokens, limits)?))
 }
 

@@ -114,19 +114,54 @@ type SceneSlot = Arc<Mutex<Option<Arc<Scene>>>>;
 
 /// Prepared scenes per (object, view space), built on first use (that takes seconds: the
 /// observable reference renders every reference view, unless the on-disk cache has it).
-/// Concurrent requests for the same scene wait for one build.
+/// Concurrent requests for the same scene wait for one build. At most `capacity` scenes are
+/// kept (tens of MB each for a 100k-triangle object): the least recently used one is dropped
+/// first; running episodes hold their own reference, so dropping never affects them.
 pub struct SceneCache {
     normalize: Normalization,
     cache_dir: Option<PathBuf>,
     settings: EpisodeSettings,
-    entries: Mutex<HashMap<SceneKey, SceneSlot>>,
+    capacity: usize,
+    entries: Mutex<Entries>,
 }
+
+/// The cache's map, with a use counter per entry for least-recently-used eviction.
+#[derive(Default)]
+struct Entries {
+    map: HashMap<SceneKey, (SceneSlot, u64)>,
+    clock: u64,
+}
+
+/// Scenes kept by default (`objview serve --scene-cache`).
+pub const DEFAULT_SCENE_CACHE: usize = 16;
 
 impl SceneCache {
     /// A cache that loads meshes with `normalize` and keeps observable references in
     /// `cache_dir` (none: not on disk).
     pub fn new(normalize: Normalization, cache_dir: Option<PathBuf>) -> SceneCache {
-        SceneCache { normalize, cache_dir, settings: EpisodeSettings::default(), entries: Mutex::default() }
+        SceneCache {
+            normalize,
+            cache_dir,
+            settings: EpisodeSettings::default(),
+            capacity: DEFAULT_SCENE_CACHE,
+            entries: Mutex::default(),
+        }
+    }
+
+    /// The same cache keeping at most `n` scenes (at least one).
+    pub fn with_capacity(mut self, n: usize) -> SceneCache {
+        self.capacity = n.max(1);
+        self
+    }
+
+    /// Scenes currently cached (built or being built).
+    pub fn len(&self) -> usize {
+        self.entries.lock().unwrap_or_else(|e| e.into_inner()).map.len()
+    }
+
+    /// Whether nothing is cached.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
     }
 
     /// How meshes are normalized.
@@ -134,14 +169,33 @@ impl SceneCache {
         self.normalize
     }
 
+    /// The slot of `key` (created empty if new), marked as just used; drops the least recently
+    /// used other entries beyond the capacity.
+    fn touch(&self, key: SceneKey) -> SceneSlot {
+        let mut e = self.entries.lock().unwrap_or_else(|e| e.into_inner());
+        e.clock += 1;
+        let now = e.clock;
+        let slot = {
+            let item = e.map.entry(key.clone()).or_default();
+            item.1 = now;
+            item.0.clone()
+        };
+        while e.map.len() > self.capacity {
+            let Some(old) =
+                e.map.iter().filter(|(k, _)| **k != key).min_by_key(|(_, v)| v.1).map(|(k, _)| k.clone())
+            else {
+                break;
+            };
+            e.map.remove(&old);
+        }
+        slot
+    }
+
     /// The scene of `obj` in the built-in view space `space` (blocking; call it off the async
     /// executor). The error text may name files: do not send it to clients.
     pub fn get(&self, obj: &ObjectRef, space: &str) -> Result<Arc<Scene>, String> {
         let key = (obj.uid.clone(), obj.mesh.clone(), obj.gt_cloud.clone(), space.to_string());
-        let entry = {
-            let mut map = self.entries.lock().unwrap_or_else(|e| e.into_inner());
-            map.entry(key).or_default().clone()
-        };
+        let entry = self.touch(key);
         let mut slot = entry.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(s) = slot.as_ref() {
             return Ok(s.clone());
@@ -164,6 +218,24 @@ impl SceneCache {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn scene_cache_drops_the_least_recently_used() {
+        let cache = SceneCache::new(Normalization::Unit, None).with_capacity(2);
+        let key = |u: &str| (u.to_string(), PathBuf::from(format!("{u}.obj")), None, "whole".to_string());
+        let a = cache.touch(key("a"));
+        cache.touch(key("b"));
+        // `a` is used again, so `b` is the oldest when `c` arrives.
+        assert!(Arc::ptr_eq(&a, &cache.touch(key("a"))));
+        cache.touch(key("c"));
+        assert_eq!(cache.len(), 2);
+        let keys: std::collections::BTreeSet<String> =
+            cache.entries.lock().unwrap().map.keys().map(|k| k.0.clone()).collect();
+        assert_eq!(keys, ["a", "c"].iter().map(|s| s.to_string()).collect());
+        // A dropped entry comes back empty (it is rebuilt on use).
+        assert!(cache.touch(key("b")).lock().unwrap().is_none());
+        assert_eq!(SceneCache::new(Normalization::Unit, None).with_capacity(0).capacity, 1);
+    }
 
     #[test]
     fn public_marks_named_splits_or_all() {

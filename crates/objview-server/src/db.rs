@@ -123,30 +123,18 @@ impl Db {
         Ok(())
     }
 
-    /// Stores an applied action (`seq` counts actions from 1) and, when it ended the episode,
-    /// its result — in one transaction.
-    pub fn record_action(
-        &self,
-        id: &str,
-        seq: usize,
-        action: &ActionRow,
-        finished: Option<(&str, &str, &str)>,
-    ) -> Result<(), DbError> {
-        let mut conn = self.conn();
-        let tx = conn.transaction()?;
-        tx.execute(
+    /// Stores an action before it is applied (`seq` counts actions from 1); a result is stored
+    /// by [`Db::record_end`].
+    pub fn record_action(&self, id: &str, seq: usize, action: &ActionRow) -> Result<(), DbError> {
+        self.conn().execute(
             "INSERT INTO actions (episode, seq, step, action, planner_seconds) VALUES (?1, ?2, ?3, ?4, ?5)",
             params![id, seq as i64, action.step as i64, action.action, action.planner_seconds],
         )?;
-        if let Some((owner, method, line)) = finished {
-            finish_in(&tx, id, owner, method, line)?;
-        }
-        tx.commit()?;
         Ok(())
     }
 
-    /// Stores the result of an episode that ended without an action (time-out, abort, replay
-    /// after a restart).
+    /// Stores the result of an episode (after its last action, a time-out, an abort, or the
+    /// replay after a restart).
     pub fn record_end(&self, id: &str, owner: &str, method: &str, line: &str) -> Result<(), DbError> {
         let mut conn = self.conn();
         let tx = conn.transaction()?;

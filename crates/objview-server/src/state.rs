@@ -693,20 +693,21 @@ impl AppState {
             )));
         }
         let secs = received.saturating_duration_since(r.obs_at).as_secs_f64();
+        let row = ActionRow { step: current, action: action.to_string(), planner_seconds: secs };
+        let seq = r.actions.len() + 1;
+        // Write-ahead: the action is stored before it is applied, so a storage failure (500)
+        // leaves the episode as it was, and a crash after this point replays the action.
+        self.db.record_action(&slot.id, seq, &row).map_err(|e| internal("storing the action", e))?;
         apply_raw(&mut r.ep, action, secs);
         r.actions.push((action.clone(), secs));
-        let row = ActionRow { step: current, action: action.to_string(), planner_seconds: secs };
-        let seq = r.actions.len();
         if r.ep.terminal().is_some() {
             let line = self.finish(slot, &mut live)?;
+            // Should this write fail, a restart recomputes the result from the stored actions.
             self.db
-                .record_action(&slot.id, seq, &row, Some((&slot.owner, &slot.spec.method, &line)))
-                .map_err(|e| internal("storing the action", e))?;
+                .record_end(&slot.id, &slot.owner, &slot.spec.method, &line)
+                .map_err(|e| internal("storing the result", e))?;
             Ok(self.finished_summary(slot, &mut live)?.obs())
         } else {
-            self.db
-                .record_action(&slot.id, seq, &row, None)
-                .map_err(|e| internal("storing the action", e))?;
             let now = Instant::now();
             r.obs_at = now;
             r.deadline = now + self.limits.action_timeout;

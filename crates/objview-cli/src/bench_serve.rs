@@ -33,11 +33,11 @@ pub struct ServeBenchArgs {
     /// Built-in object of the in-process server (see `objview objects list`).
     #[arg(long, default_value = "mug")]
     pub object: String,
-    /// Its triangle count.
-    #[arg(long, default_value_t = 20_000)]
+    /// Its triangle count (the size: ~100k).
+    #[arg(long, default_value_t = 100_000)]
     pub triangles: usize,
-    /// Its ground-truth points.
-    #[arg(long, default_value_t = 50_000)]
+    /// Its ground-truth points (as `bench episode`).
+    #[arg(long, default_value_t = 300_000)]
     pub gt_points: usize,
     /// Target a running server instead (needs --split and --target-object).
     #[arg(long)]

@@ -39,6 +39,44 @@ struct TargetIndex {
     pt_block: Vec<u32>,
 }
 
+impl TargetIndex {
+    /// Calls `f(target block, first, end)` with the index range of the targets in the fine
+    /// voxels within `r` (per axis) of voxel `k`: runs of consecutive voxels along x within one
+    /// block, which are contiguous in the sorted points.
+    #[inline]
+    fn for_runs_around(&self, k: [i32; 3], r: i32, mut f: impl FnMut(u32, u32, u32)) {
+        for dz in -r..=r {
+            for dy in -r..=r {
+                let mut dx = -r;
+                while dx <= r {
+                    let kk = [k[0] + dx, k[1] + dy, k[2] + dz];
+                    let run_end = (dx + (BLOCK - 1 - (kk[0] & (BLOCK - 1)))).min(r);
+                    let len = (run_end - dx + 1) as usize;
+                    dx = run_end + 1;
+                    let Some(b) = self.domain.block_index(block_of(kk)) else { continue };
+                    let t = self.table[b];
+                    if t == NONE {
+                        continue;
+                    }
+                    let starts = &self.cell_start[t as usize];
+                    let li = local_index(kk);
+                    f(t, starts[li], starts[li + len]);
+                }
+            }
+        }
+    }
+}
+
+/// Records that target `i`'s distance was written in update `epoch` (once per update): only
+/// such targets can gain coverage (see [`Targets::coverage`]).
+#[inline]
+fn record_touch(tstamp: &mut [u32], touched: &mut Vec<u32>, epoch: u32, i: u32) {
+    if tstamp[i as usize] != epoch {
+        tstamp[i as usize] = epoch;
+        touched.push(i);
+    }
+}
+
 /// A fixed point set with its nearest-fused distances. Cloning a fresh set (before its first
 /// update) is the cheap way to start another episode on the same points: the index is shared.
 #[derive(Debug, Clone)]
@@ -268,58 +306,37 @@ impl Targets {
         }
         let mut slot_min = vec![f64::INFINITY; changed.len()];
         // Push: targets in the 27 voxels around each changed slot.
+        let ix = std::sync::Arc::clone(&self.ix);
         for (ci, &s) in changed.iter().enumerate() {
             let q = fused.pos[s as usize];
             let k = fused.key[s as usize];
             let mut own = f64::INFINITY;
-            for dz in -1..=1 {
-                for dy in -1..=1 {
-                    // The three voxels along x, as runs of consecutive voxels within one block
-                    // (contiguous in the sorted points).
-                    let mut dx = -1;
-                    while dx <= 1 {
-                        let kk = [k[0] + dx, k[1] + dy, k[2] + dz];
-                        let run_end = (dx + (BLOCK - 1 - (kk[0] & (BLOCK - 1)))).min(1);
-                        let first = dx;
-                        dx = run_end + 1;
-                        let Some(b) = self.ix.domain.block_index(block_of(kk)) else { continue };
-                        let t = self.ix.table[b];
-                        if t == NONE || self.live[t as usize] == 0 {
-                            continue;
+            ix.for_runs_around(k, 1, |t, lo, hi| {
+                if self.live[t as usize] == 0 {
+                    return;
+                }
+                for i in lo..hi {
+                    let iu = i as usize;
+                    if self.retired[iu] {
+                        continue;
+                    }
+                    let d = dist2(ix.pts[iu], q);
+                    own = own.min(d);
+                    if self.nn[iu] == s {
+                        if d <= self.d2[iu] {
+                            self.d2[iu] = if d < self.cap2 { d } else { f64::INFINITY };
+                            record_touch(&mut self.tstamp, &mut self.touched, self.epoch, i);
+                        } else if self.mark[iu] != self.epoch {
+                            self.mark[iu] = self.epoch;
+                            recompute.push(i);
                         }
-                        let starts = &self.ix.cell_start[t as usize];
-                        let li = local_index(kk);
-                        let (lo, hi) = (starts[li], starts[li + (run_end - first) as usize + 1]);
-                        for i in lo..hi {
-                            let iu = i as usize;
-                            if self.retired[iu] {
-                                continue;
-                            }
-                            let d = dist2(self.ix.pts[iu], q);
-                            own = own.min(d);
-                            if self.nn[iu] == s {
-                                if d <= self.d2[iu] {
-                                    self.d2[iu] = if d < self.cap2 { d } else { f64::INFINITY };
-                                    if self.tstamp[iu] != self.epoch {
-                                        self.tstamp[iu] = self.epoch;
-                                        self.touched.push(i);
-                                    }
-                                } else if self.mark[iu] != self.epoch {
-                                    self.mark[iu] = self.epoch;
-                                    recompute.push(i);
-                                }
-                            } else if d < self.d2[iu] && d < self.cap2 {
-                                self.d2[iu] = d;
-                                self.nn[iu] = s;
-                                if self.tstamp[iu] != self.epoch {
-                                    self.tstamp[iu] = self.epoch;
-                                    self.touched.push(i);
-                                }
-                            }
-                        }
+                    } else if d < self.d2[iu] && d < self.cap2 {
+                        self.d2[iu] = d;
+                        self.nn[iu] = s;
+                        record_touch(&mut self.tstamp, &mut self.touched, self.epoch, i);
                     }
                 }
-            }
+            });
             slot_min[ci] = own;
         }
         // Far targets: minimum with the changed slots, or a full search if their slot moved.
@@ -349,10 +366,7 @@ impl Targets {
             for u in updates.iter().flatten() {
                 let iu = u.target as usize;
                 self.d2[iu] = u.d2;
-                if self.tstamp[iu] != self.epoch {
-                    self.tstamp[iu] = self.epoch;
-                    self.touched.push(u.target);
-                }
+                record_touch(&mut self.tstamp, &mut self.touched, self.epoch, u.target);
                 self.nn[iu] = u.nn;
                 if u.resolved {
                     self.mark[iu] = 0;
@@ -366,10 +380,7 @@ impl Targets {
             todo.par_iter().with_min_len(64).map(|&i| this.search_moved(fused, i as usize)).collect();
         for (&i, &(d, s)) in todo.iter().zip(&found) {
             self.d2[i as usize] = d;
-            if self.tstamp[i as usize] != self.epoch {
-                self.tstamp[i as usize] = self.epoch;
-                self.touched.push(i);
-            }
+            record_touch(&mut self.tstamp, &mut self.touched, self.epoch, i);
             self.nn[i as usize] = s;
         }
         // The next far list: previous far targets and recomputed ones still farther than h.
@@ -387,12 +398,20 @@ impl Targets {
         slot_min
     }
 
-    /// For a target whose nearest slot moved in this step: d² to that slot's new position,
-    /// capped (an upper bound of its new distance).
-    fn moved_bound(&self, fused: &FusedCloud, i: usize) -> f64 {
+    /// For a target whose nearest slot moved in this step: d² to that slot's new position and
+    /// the slot — an upper bound of its new distance —, or `(cap², NONE)` when that is not
+    /// below the cap.
+    fn moved_bound(&self, fused: &FusedCloud, i: usize) -> (f64, u32) {
         match self.nn[i] {
-            NONE => self.cap2,
-            n => dist2(self.ix.pts[i], fused.pos[n as usize]).min(self.cap2),
+            NONE => (self.cap2, NONE),
+            n => {
+                let d = dist2(self.ix.pts[i], fused.pos[n as usize]);
+                if d < self.cap2 {
+                    (d, n)
+                } else {
+                    (self.cap2, NONE)
+                }
+            }
         }
     }
 
@@ -413,7 +432,7 @@ impl Targets {
             let iu = i as usize;
             let bound = if self.mark[iu] == self.epoch {
                 // Nearest slot moved: its new position bounds the answer.
-                self.moved_bound(fused, iu)
+                self.moved_bound(fused, iu).0
             } else {
                 self.d2[iu].min(self.cap2)
             };
@@ -433,12 +452,8 @@ impl Targets {
             let iu = i as usize;
             let p = self.ix.pts[iu];
             let moved = self.mark[iu] == self.epoch;
-            let mut best = if moved {
-                let b = self.moved_bound(fused, iu);
-                (b, if b < self.cap2 { self.nn[iu] } else { NONE })
-            } else {
-                (self.d2[iu].min(self.cap2), self.nn[iu])
-            };
+            let mut best =
+                if moved { self.moved_bound(fused, iu) } else { (self.d2[iu].min(self.cap2), self.nn[iu]) };
             if !moved && best.0 <= 4.0 * h2 {
                 // Close: the changed slots within √d² lie in the fine voxels within
                 // ⌈√d²/h⌉ ≤ 2 of p's.
@@ -490,19 +505,8 @@ impl Targets {
     /// `(∞, NONE)` when nothing is within the cap. The moved slot's new position bounds the
     /// answer from above, which keeps the search local.
     fn search_moved(&self, fused: &FusedCloud, i: usize) -> (f64, u32) {
-        let p = self.ix.pts[i];
-        let (ub, ub_slot) = match self.nn[i] {
-            NONE => (self.cap2, NONE),
-            n => {
-                let d = dist2(p, fused.pos[n as usize]);
-                if d < self.cap2 {
-                    (d, n)
-                } else {
-                    (self.cap2, NONE)
-                }
-            }
-        };
-        let (d, s) = fused.nearest(p, ub);
+        let (ub, ub_slot) = self.moved_bound(fused, i);
+        let (d, s) = fused.nearest(self.ix.pts[i], ub);
         let (d, s) = if s == NONE { (ub, ub_slot) } else { (d, s) };
         if s == NONE {
             (f64::INFINITY, NONE)
@@ -817,30 +821,13 @@ impl Targets {
         let t2 = tau * tau;
         let r = (tau / self.ix.domain.h).ceil() as i32;
         for &q in points {
-            let k = self.ix.domain.key(q);
-            for dz in -r..=r {
-                for dy in -r..=r {
-                    let mut dx = -r;
-                    while dx <= r {
-                        let kk = [k[0] + dx, k[1] + dy, k[2] + dz];
-                        let run_end = (dx + (BLOCK - 1 - (kk[0] & (BLOCK - 1)))).min(r);
-                        let first = dx;
-                        dx = run_end + 1;
-                        let Some(b) = self.ix.domain.block_index(block_of(kk)) else { continue };
-                        let t = self.ix.table[b];
-                        if t == NONE {
-                            continue;
-                        }
-                        let starts = &self.ix.cell_start[t as usize];
-                        let li = local_index(kk);
-                        for i in starts[li]..starts[li + (run_end - first) as usize + 1] {
-                            if dist2(self.ix.pts[i as usize], q) < t2 {
-                                bits[i as usize / 64] |= 1 << (i % 64);
-                            }
-                        }
+            self.ix.for_runs_around(self.ix.domain.key(q), r, |_, lo, hi| {
+                for i in lo..hi {
+                    if dist2(self.ix.pts[i as usize], q) < t2 {
+                        bits[i as usize / 64] |= 1 << (i % 64);
                     }
                 }
-            }
+            });
         }
     }
 

@@ -69,24 +69,13 @@ impl Domain {
         [x + self.lo[0], y + self.lo[1], z + self.lo[2]]
     }
 
-    /// Squared distance from `p` to the box of block key `b` (0 inside).
+    /// The box of the cube with key `c` on the grid of cubes `cells` fine voxels wide (a block:
+    /// `BLOCK`; a superblock: `BLOCK << SUPER_SHIFT`).
     #[inline]
-    pub fn block_dist2(&self, p: [f64; 3], b: [i32; 3]) -> f64 {
-        let e = self.h * BLOCK as f64;
-        let mut d2 = 0.0;
-        for a in 0..3 {
-            let lo = b[a] as f64 * e;
-            let hi = lo + e;
-            let d = if p[a] < lo {
-                lo - p[a]
-            } else if p[a] > hi {
-                p[a] - hi
-            } else {
-                0.0
-            };
-            d2 += d * d;
-        }
-        d2
+    pub fn cube_box(&self, c: [i32; 3], cells: i32) -> Aabb {
+        let e = self.h * cells as f64;
+        let lo = [c[0] as f64 * e, c[1] as f64 * e, c[2] as f64 * e];
+        Aabb { lo, hi: [lo[0] + e, lo[1] + e, lo[2] + e] }
     }
 }
 
@@ -263,7 +252,7 @@ pub fn nearest_in<S: Bucketed>(set: &S, p: [f64; 3], bound2: f64) -> (f64, u32) 
             break;
         }
         for_each_ring_block(sk, r, |s| {
-            if super_box_dist2(domain, p, s) >= best.0 {
+            if domain.cube_box(s, BLOCK << SUPER_SHIFT).dist2(p) >= best.0 {
                 return;
             }
             for (b, aabb) in grid.blocks(s) {
@@ -274,25 +263,6 @@ pub fn nearest_in<S: Bucketed>(set: &S, p: [f64; 3], bound2: f64) -> (f64, u32) 
         });
     }
     best
-}
-
-/// Squared distance from `p` to the box of superblock key `s` (0 inside).
-fn super_box_dist2(d: &Domain, p: [f64; 3], s: [i32; 3]) -> f64 {
-    let e = d.h * (BLOCK << SUPER_SHIFT) as f64;
-    let mut d2 = 0.0;
-    for a in 0..3 {
-        let lo = s[a] as f64 * e;
-        let hi = lo + e;
-        let g = if p[a] < lo {
-            lo - p[a]
-        } else if p[a] > hi {
-            p[a] - hi
-        } else {
-            0.0
-        };
-        d2 += g * g;
-    }
-    d2
 }
 
 /// Calls `f` for every block key at Chebyshev distance exactly `r` from `c`.
@@ -334,8 +304,9 @@ mod tests {
         // The domain covers ±1.05: key of 1.05 lies in a block inside.
         assert!(d.block_index(block_of(d.key([1.05, -1.05, 0.0]))).is_some());
         // Box distance: block [0,0.04)³.
-        assert!((d.block_dist2([0.05, 0.02, 0.02], [0, 0, 0]) - 1e-4).abs() < 1e-15);
-        assert_eq!(d.block_dist2([0.01, 0.02, 0.03], [0, 0, 0]), 0.0);
+        let block = d.cube_box([0, 0, 0], BLOCK);
+        assert!((block.dist2([0.05, 0.02, 0.02]) - 1e-4).abs() < 1e-15);
+        assert_eq!(block.dist2([0.01, 0.02, 0.03]), 0.0);
     }
 
     #[test]

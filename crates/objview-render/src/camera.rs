@@ -13,7 +13,8 @@ use objview_geom::vec3::{cross, dot, normalize, sub};
 use objview_geom::Pose;
 
 /// Pinhole intrinsics in pixels, with near/far clipping distances along the camera z axis.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Serialized with these field names (results, sidecars, the server's observations).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Intrinsics {
     pub width: u32,
     pub height: u32,

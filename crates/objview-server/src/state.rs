@@ -252,8 +252,8 @@ struct Running {
     obs_at: Instant,
     /// When the client loses the episode.
     deadline: Instant,
-    /// Applied actions (raw JSON) and the planning time each was given.
-    actions: Vec<(Value, f64)>,
+    /// Actions applied so far (they are stored in the database; replay reads them there).
+    applied: usize,
 }
 
 impl Running {
@@ -325,9 +325,7 @@ fn obs_json(step: usize, pose: Option<[f64; 7]>, terminal: Option<&TerminalInfo>
 
 /// The camera intrinsics of every observation (SPEC §2; every scene uses them).
 fn intrinsics_json() -> Value {
-    let i = objview_render::Intrinsics::default();
-    json!({"width": i.width, "height": i.height, "fx": i.fx, "fy": i.fy, "cx": i.cx, "cy": i.cy,
-           "znear": i.znear, "zfar": i.zfar})
+    serde_json::to_value(objview_render::Intrinsics::default()).unwrap_or(Value::Null)
 }
 
 /// Applies one raw action as received: an `action` that is not a well-formed move or stop ends
@@ -565,13 +563,8 @@ impl AppState {
         let budget = spec.budget();
         let start = ep.history()[0];
         let now = Instant::now();
-        let running = Running {
-            ep,
-            record,
-            obs_at: now,
-            deadline: now + self.limits.start_timeout,
-            actions: Vec::new(),
-        };
+        let running =
+            Running { ep, record, obs_at: now, deadline: now + self.limits.start_timeout, applied: 0 };
         let body = json!({
             "episode_id": id,
             "object_id": spec.object,
@@ -647,7 +640,7 @@ impl AppState {
         if at < r.deadline {
             return Ok(false);
         }
-        let (limit, what) = if r.actions.is_empty() {
+        let (limit, what) = if r.applied == 0 {
             (self.limits.start_timeout, "the create response")
         } else {
             (self.limits.action_timeout, "the last observation")
@@ -694,12 +687,12 @@ impl AppState {
         }
         let secs = received.saturating_duration_since(r.obs_at).as_secs_f64();
         let row = ActionRow { step: current, action: action.to_string(), planner_seconds: secs };
-        let seq = r.actions.len() + 1;
+        let seq = r.applied + 1;
         // Write-ahead: the action is stored before it is applied, so a storage failure (500)
         // leaves the episode as it was, and a crash after this point replays the action.
         self.db.record_action(&slot.id, seq, &row).map_err(|e| internal("storing the action", e))?;
         apply_raw(&mut r.ep, action, secs);
-        r.actions.push((action.clone(), secs));
+        r.applied = seq;
         if r.ep.terminal().is_some() {
             let line = self.finish(slot, &mut live)?;
             // Should this write fail, a restart recomputes the result from the stored actions.

@@ -631,7 +631,7 @@ pub fn summary_csv(aggregates: &[Aggregate], tau: &str, taus: &[String]) -> Stri
                 a.view_space.clone(),
                 a.method.clone(),
                 a.family.clone(),
-                mode_name(a.execution_mode).to_string(),
+                objview_episode::engine::mode_name(a.execution_mode).to_string(),
                 a.n.to_string(),
                 a.objects.to_string(),
                 a.from_step.to_string(),
@@ -653,14 +653,4 @@ pub fn summary_csv(aggregates: &[Aggregate], tau: &str, taus: &[String]) -> Stri
         })
         .collect();
     csv(&headers, &rows)
-}
-
-/// The wire name of an execution mode.
-pub fn mode_name(m: objview_episode::ExecutionMode) -> &'static str {
-    use objview_episode::ExecutionMode::*;
-    match m {
-        Iterative => "iterative",
-        BudgetedPlan => "budgeted_plan",
-        SetCoverPlan => "set_cover_plan",
-    }
 }

@@ -6,6 +6,9 @@ cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 [ -f "$HOME/.cargo/env" ] && . "$HOME/.cargo/env"
 
+echo "== set-up probes (fake trees, and this machine after set-up)"
+OBJVIEW_PROBES_AFTER_SETUP=1 bash scripts/test-probes.sh
+
 echo "== cargo fmt --check"
 cargo fmt --all -- --check
 echo "== cargo clippy"

@@ -22,6 +22,7 @@ for arg in "$@"; do
     --main) cmd=scripts/main.sh ;;
     --remove-installed) remove=1 ;;
     --keep-clone) keep=1 ;;
+    --) ;;
     *) echo "fresh-check: unknown argument $arg (see the comment at the top)" >&2; exit 2 ;;
   esac
 done

@@ -18,4 +18,7 @@ echo "== cargo test"
 cargo test --workspace --locked --profile ci
 echo "== python client and Gymnasium env (pytest against a real objview serve)"
 # `cargo test` above built the binary the CLI tests use; the Python suite starts it as a server.
-OBJVIEW_BIN="${OBJVIEW_BIN:-${CARGO_TARGET_DIR:-target}/ci/objview}" bash python/run_tests.sh
+# The path must be absolute: run_tests.sh runs pytest from python/tests.
+target_dir="${CARGO_TARGET_DIR:-target}"
+case "$target_dir" in /*) ;; *) target_dir="$PWD/$target_dir" ;; esac
+OBJVIEW_BIN="${OBJVIEW_BIN:-$target_dir/ci/objview}" bash python/run_tests.sh

@@ -208,4 +208,57 @@ mod tests {
         assert_eq!(percent_decode("a%zz%"), b"a%zz%");
         assert_eq!(percent_decode("%41"), b"A");
     }
+
+    #[test]
+    fn resolve_inside_accepts_only_files_inside_the_asset_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        std::fs::create_dir_all(d.join("asset/sub")).unwrap();
+        std::fs::write(d.join("asset/sub/a b.bin"), b"x").unwrap();
+        std::fs::write(d.join("secret.bin"), b"x").unwrap();
+        let asset = d.join("asset/m.gltf");
+        let inside = d.join("asset/sub/a b.bin").canonicalize().unwrap();
+        assert_eq!(resolve_inside(&asset, "sub/a%20b.bin").unwrap(), inside);
+        assert_eq!(resolve_inside(&asset, "./sub//a b.bin").unwrap(), inside);
+        for (reference, want) in [
+            ("../secret.bin", "'..' is not allowed"),
+            ("sub/%2E%2e/../secret.bin", "'..' is not allowed"),
+            ("sub\\..\\..\\secret.bin", "'..' is not allowed"),
+            ("/etc/passwd", "absolute paths"),
+            ("%2Fetc%2Fpasswd", "absolute paths"),
+            ("C:/Windows/win.ini", "absolute paths"),
+            ("a%00b", "NUL"),
+            ("", "empty path"),
+            ("%ff", "not UTF-8"),
+        ] {
+            let e = resolve_inside(&asset, reference).unwrap_err().to_string();
+            assert!(e.contains("m.gltf") && e.contains(want), "{reference}: {e}");
+        }
+        let e = resolve_inside(&asset, "sub/missing.bin").unwrap_err().to_string();
+        assert!(e.contains("missing.bin"), "{e}");
+        #[cfg(unix)]
+        {
+            std::os::unix::fs::symlink(d.join("secret.bin"), d.join("asset/out.bin")).unwrap();
+            std::os::unix::fs::symlink(d.join("asset/sub"), d.join("asset/in")).unwrap();
+            let e = resolve_inside(&asset, "out.bin").unwrap_err().to_string();
+            assert!(e.contains("outside the asset's folder"), "{e}");
+            assert_eq!(resolve_inside(&asset, "in/a%20b.bin").unwrap(), inside);
+            // An asset folder reached through a symlink works.
+            std::os::unix::fs::symlink(d.join("asset"), d.join("alias")).unwrap();
+            assert_eq!(resolve_inside(&d.join("alias/m.gltf"), "sub/a b.bin").unwrap(), inside);
+        }
+    }
+
+    #[test]
+    fn read_regular_checks_the_size_before_reading() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("f.bin");
+        std::fs::write(&p, [7u8; 10]).unwrap();
+        assert_eq!(read_regular(&p, 10).unwrap(), vec![7u8; 10]);
+        let e = read_regular(&p, 9).unwrap_err().to_string();
+        assert!(e.contains("f.bin: file of 10 bytes is over the limit of 9 bytes"), "{e}");
+        let e = read_regular(dir.path(), 100).unwrap_err().to_string();
+        assert!(e.contains("not a regular file (it is a directory)"), "{e}");
+        assert_eq!(open_regular(&p, 10).unwrap().1, 10);
+    }
 }

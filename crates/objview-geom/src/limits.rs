@@ -207,7 +207,7 @@ mod tests {
             ("OBJVIEW_MAX_FILE_BYTES", "4G"),
             ("OBJVIEW_MAX_REFERENCED_BYTES", "512MiB"),
             ("OBJVIEW_MAX_DECOMPRESSED_BYTES", "64kb"),
-            ("OBJVIEW_MAX_TEXTURE_BYTES", "1000"),
+            ("OBJVIEW_MAX_TEXTURE_BYTES", "1000B"),
             ("OBJVIEW_MAX_TRIANGLES", "7"),
             ("OBJVIEW_MAX_VERTICES", "8"),
             ("OBJVIEW_MAX_GLTF_NODES", "9"),
@@ -243,5 +243,25 @@ mod tests {
             let e = with(&[(var, val)]).unwrap_err();
             assert!(e.contains(var) && e.contains(val), "{e}");
         }
+    }
+
+    #[test]
+    fn error_messages_name_each_limit_by_its_variable() {
+        for (w, env) in [
+            (Which::FileBytes, "OBJVIEW_MAX_FILE_BYTES"),
+            (Which::ReferencedBytes, "OBJVIEW_MAX_REFERENCED_BYTES"),
+            (Which::DecompressedBytes, "OBJVIEW_MAX_DECOMPRESSED_BYTES"),
+            (Which::TextureBytes, "OBJVIEW_MAX_TEXTURE_BYTES"),
+            (Which::Triangles, "OBJVIEW_MAX_TRIANGLES"),
+            (Which::Vertices, "OBJVIEW_MAX_VERTICES"),
+            (Which::GltfNodes, "OBJVIEW_MAX_GLTF_NODES"),
+            (Which::Points, "OBJVIEW_MAX_POINTS"),
+        ] {
+            assert_eq!(w.env(), env);
+        }
+        assert_eq!(over(Which::Points, 5), "over the limit of 5 (OBJVIEW_MAX_POINTS raises it)");
+        assert_eq!(parse_value("100", true), Some(100));
+        assert_eq!(parse_value("5iB", true), None);
+        assert_eq!(parse_value("2k", true), Some(2048));
     }
 }

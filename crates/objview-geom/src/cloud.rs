@@ -6,7 +6,14 @@
 //! [`sample_surface`] with [`cloud_count`] points and a fixed seed, so that every run of the
 //! benchmark scores against the same points. Writers ([`write_pcd_binary`],
 //! [`write_ply_points`]) export clouds for inspection and caching.
+//!
+//! Cloud files are untrusted input: they are read through [`crate::fsutil`] (regular files
+//! only, size-capped) and within the [`Limits`]: point counts are checked against the file
+//! size and [`Limits::max_points`] before anything is allocated, an `.npz` member and a PCD
+//! compressed block within [`Limits::max_decompressed_bytes`] (the declared size is checked
+//! and the actual inflation is bounded too).
 
+use crate::limits::{over, Limits, Which};
 use crate::normalize::Transform;
 use crate::npy::parse_npy_f64;
 use crate::{GeomError, Mesh};
@@ -125,21 +132,31 @@ impl AliasTable {
 /// Reads a ground-truth cloud, choosing the format from the extension (case-insensitive):
 /// `.pcd`, `.ply` (vertex x/y/z), `.npy` (shape (n, 3), or (n, k ≥ 3) whose first three
 /// columns are x y z), `.npz` (the array named `points`, `xyz` or `arr_0`, else the first).
-/// Empty clouds and non-finite coordinates are errors naming the file.
+/// Empty clouds and non-finite coordinates are errors naming the file. Reads within the
+/// process-wide [`Limits::global`].
 pub fn read_cloud(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
+    read_cloud_with(path, Limits::for_file(path)?)
+}
+
+/// [`read_cloud`] within explicit `limits`.
+pub fn read_cloud_with(path: &Path, limits: &Limits) -> Result<Vec<[f64; 3]>, GeomError> {
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     let pts = crate::io::catch_panic(path, || match ext.as_deref() {
-        Some("pcd") => read_pcd(path),
-        Some("ply") => Ok(crate::io::ply::read(path, false)?.positions),
+        Some("pcd") => read_pcd(path, limits),
+        Some("ply") => Ok(crate::io::ply::read(path, false, limits)?.positions),
         Some("npy") => {
-            let bytes = std::fs::read(path).map_err(|e| GeomError::io(path, e))?;
-            npy_points(path, &bytes, "")
+            let bytes = crate::io::read_input(path, limits)?;
+            npy_points(path, &bytes, "", limits)
         }
-        Some("npz") => read_npz(path),
+        Some("npz") => read_npz(path, limits),
         _ => Err(GeomError::Unsupported { path: path.to_path_buf(), expected: "pcd, ply, npy, npz" }),
     })?;
     if pts.is_empty() {
         return Err(GeomError::invalid(path, "point cloud has no points"));
+    }
+    if pts.len() as u64 > limits.max_points {
+        let o = over(Which::Points, limits.max_points);
+        return Err(GeomError::invalid(path, format!("{} points, {o}", pts.len())));
     }
     if let Some((i, p)) = pts.iter().enumerate().find(|(_, p)| !p.iter().all(|x| x.is_finite())) {
         return Err(GeomError::invalid(path, format!("point {i} has a non-finite coordinate {p:?}")));
@@ -148,7 +165,7 @@ pub fn read_cloud(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
 }
 
 /// Points from NPY bytes; `entry` names the NPZ member in errors ("" for a plain .npy).
-fn npy_points(path: &Path, bytes: &[u8], entry: &str) -> Result<Vec<[f64; 3]>, GeomError> {
+fn npy_points(path: &Path, bytes: &[u8], entry: &str, limits: &Limits) -> Result<Vec<[f64; 3]>, GeomError> {
     let (shape, v) = parse_npy_f64(path, bytes).map_err(|e| match e {
         GeomError::Parse { path, reason } if !entry.is_empty() => {
             GeomError::Parse { path, reason: format!("entry '{entry}': {reason}") }
@@ -161,30 +178,50 @@ fn npy_points(path: &Path, bytes: &[u8], entry: &str) -> Result<Vec<[f64; 3]>, G
     if k < 3 {
         return Err(GeomError::invalid(path, format!("{entry} array of shape {shape:?} is not (n, 3)")));
     }
+    if shape[0] as u64 > limits.max_points {
+        let o = over(Which::Points, limits.max_points);
+        return Err(GeomError::invalid(
+            path,
+            format!("{entry} array of shape {shape:?} has too many points, {o}"),
+        ));
+    }
     Ok(v.chunks_exact(k).map(|c| [c[0], c[1], c[2]]).collect())
 }
 
-/// Reads the chosen array of an `.npz` archive (see [`read_cloud`]).
-fn read_npz(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
-    let file = std::fs::File::open(path).map_err(|e| GeomError::io(path, e))?;
+/// Reads the chosen array of an `.npz` archive (see [`read_cloud`]); the member must inflate
+/// to at most [`Limits::max_decompressed_bytes`] (its declared size is checked first and the
+/// inflation is cut off at the limit, whatever the header says).
+fn read_npz(path: &Path, limits: &Limits) -> Result<Vec<[f64; 3]>, GeomError> {
+    let (file, _) = crate::fsutil::open_limited(path, limits.max_file_bytes, Some(Which::FileBytes))?;
     let mut zip = zip::ZipArchive::new(std::io::BufReader::new(file))
         .map_err(|e| GeomError::parse(path, format!("invalid NPZ (zip): {e}")))?;
-    let names: Vec<String> =
-        (0..zip.len()).filter_map(|i| zip.by_index(i).ok().map(|f| f.name().to_string())).collect();
+    let names: Vec<String> = zip.file_names().map(str::to_string).collect();
     let chosen = ["points.npy", "xyz.npy", "arr_0.npy"]
         .iter()
         .find_map(|want| names.iter().find(|n| n.as_str() == *want))
         .or_else(|| names.iter().find(|n| n.ends_with(".npy")))
         .cloned()
         .ok_or_else(|| GeomError::invalid(path, "NPZ archive contains no .npy array"))?;
-    let mut entry = zip
+    let entry = zip
         .by_name(&chosen)
         .map_err(|e| GeomError::parse(path, format!("invalid NPZ entry '{chosen}': {e}")))?;
+    let max = limits.max_decompressed_bytes;
+    let too_big = |size: String| {
+        let o = over(Which::DecompressedBytes, max);
+        GeomError::invalid(path, format!("NPZ entry '{chosen}' inflates to {size} bytes, {o}"))
+    };
+    if entry.size() > max {
+        return Err(too_big(entry.size().to_string()));
+    }
     let mut bytes = Vec::new();
     entry
+        .take(max.saturating_add(1))
         .read_to_end(&mut bytes)
         .map_err(|e| GeomError::parse(path, format!("invalid NPZ entry '{chosen}': {e}")))?;
-    npy_points(path, &bytes, &chosen)
+    if bytes.len() as u64 > max {
+        return Err(too_big(format!("more than {max}")));
+    }
+    npy_points(path, &bytes, &chosen, limits)
 }
 
 /// One FIELDS entry of a PCD header.
@@ -195,8 +232,16 @@ struct PcdField {
     count: usize,
 }
 
-/// Decompresses an LZF block (the codec of PCD `binary_compressed`) of known output size.
+/// An input of n bytes decodes to at most `LZF_MAX_RATIO`·n bytes: the longest back-reference
+/// (3 bytes) copies 264.
+const LZF_MAX_RATIO: usize = 88;
+
+/// Decompresses an LZF block (the codec of PCD `binary_compressed`) of known output size. A
+/// declared size the input cannot expand to is refused before anything is allocated.
 pub fn lzf_decompress(input: &[u8], out_len: usize) -> Result<Vec<u8>, String> {
+    if out_len > input.len().saturating_mul(LZF_MAX_RATIO) {
+        return Err(format!("{} compressed bytes cannot expand to the declared {out_len}", input.len()));
+    }
     let mut out: Vec<u8> = Vec::with_capacity(out_len);
     let mut ip = 0;
     while ip < input.len() {
@@ -246,8 +291,8 @@ pub fn lzf_decompress(input: &[u8], out_len: usize) -> Result<Vec<u8>, String> {
 }
 
 /// Reads a PCD file (ascii, binary or binary_compressed); x, y, z must be float fields.
-fn read_pcd(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
-    let bytes = std::fs::read(path).map_err(|e| GeomError::io(path, e))?;
+fn read_pcd(path: &Path, limits: &Limits) -> Result<Vec<[f64; 3]>, GeomError> {
+    let bytes = crate::io::read_input(path, limits)?;
     let bad = |why: String| GeomError::parse(path, format!("invalid PCD: {why}"));
     let mut fields: Vec<PcdField> = Vec::new();
     let (mut sizes, mut types, mut counts) = (None, None, None);
@@ -312,7 +357,8 @@ fn read_pcd(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
         if let Some(c) = &counts {
             f.count = c[i];
         }
-        if !matches!(f.size, 1 | 2 | 4 | 8) || f.count > 1 << 20 {
+        // COUNT 0 would make the field take no room, shifting the fields after it.
+        if !matches!(f.size, 1 | 2 | 4 | 8) || f.count == 0 || f.count > 1 << 20 {
             return Err(bad(format!("field '{}' has SIZE {} COUNT {}", f.name, f.size, f.count)));
         }
     }
@@ -321,6 +367,10 @@ fn read_pcd(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
         (None, Some(w)) => w.saturating_mul(height),
         _ => return Err(bad("neither POINTS nor WIDTH given".into())),
     };
+    if n as u64 > limits.max_points {
+        let o = over(Which::Points, limits.max_points);
+        return Err(GeomError::invalid(path, format!("header declares {n} points, {o}")));
+    }
     // Index of x, y, z in the field list, with their element offset (ascii) and byte offset.
     let mut xyz = [(0usize, 0usize, 0usize); 3];
     for (k, axis) in ["x", "y", "z"].iter().enumerate() {
@@ -335,6 +385,7 @@ fn read_pcd(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
         let byte_off: usize = fields[..i].iter().map(|f| f.size * f.count).sum();
         xyz[k] = (i, elem_off, byte_off);
     }
+    // At most 8·2^20 bytes per field and fewer fields than header bytes: no overflow.
     let record: usize = fields.iter().map(|f| f.size * f.count).sum();
     let data = &bytes[pos..];
     let float_at = |s: &[u8], size: usize| -> f64 {
@@ -401,6 +452,13 @@ fn read_pcd(path: &Path) -> Result<Vec<[f64; 3]>, GeomError> {
             };
             if usize_ != n.saturating_mul(record) {
                 return Err(bad(format!("uncompressed size {usize_} != {n} points × {record} bytes")));
+            }
+            if usize_ as u64 > limits.max_decompressed_bytes {
+                let o = over(Which::DecompressedBytes, limits.max_decompressed_bytes);
+                return Err(GeomError::invalid(
+                    path,
+                    format!("compressed PCD data inflates to {usize_} bytes, {o}"),
+                ));
             }
             let raw = lzf_decompress(comp, usize_).map_err(bad)?;
             // Field-major layout: all values of field 0, then of field 1, ...
@@ -636,6 +694,110 @@ mod tests {
         write_ply_points(&dir.path().join("t.ply"), &[[0.0, f64::NAN, 0.0]]).unwrap();
         nan.extend(std::fs::read(dir.path().join("t.ply")).unwrap());
         check("nan.ply", &nan, "non-finite");
+    }
+
+    #[test]
+    fn pcd_fields_with_count_zero_are_errors_without_a_panic() {
+        let dir = tempfile::tempdir().unwrap();
+        // All counts 0 and one data byte: the old reader indexed past it (a caught panic).
+        let b = b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 0 0 0\nPOINTS 1\nDATA binary\n\x01";
+        let e = read_cloud(&write(&dir, "z.pcd", b)).unwrap_err().to_string();
+        assert!(e.contains("z.pcd") && e.contains("field 'x' has SIZE 4 COUNT 0"), "{e}");
+        assert!(!e.contains("parser failed"), "{e}");
+        // y with COUNT 0 used to read z's bytes as y.
+        let mut b = b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 0 1\nPOINTS 1\nDATA binary\n".to_vec();
+        b.extend(f32s(&[1.0, 2.0]));
+        let e = read_cloud(&write(&dir, "y.pcd", &b)).unwrap_err().to_string();
+        assert!(e.contains("field 'y' has SIZE 4 COUNT 0"), "{e}");
+    }
+
+    #[test]
+    fn point_counts_are_checked_against_the_limit_and_the_data() {
+        let dir = tempfile::tempdir().unwrap();
+        let l = Limits { max_points: 49, ..Limits::default() };
+        let p = pts(); // 50 points
+        let flat: Vec<f64> = p.iter().flatten().copied().collect();
+        crate::npy::write_npy_f64(&dir.path().join("a.npy"), &[p.len(), 3], &flat).unwrap();
+        write_pcd_binary(&dir.path().join("a.pcd"), &p).unwrap();
+        for name in ["a.npy", "a.pcd"] {
+            let path = dir.path().join(name);
+            assert_eq!(read_cloud_with(&path, &Limits::default()).unwrap().len(), 50);
+            let e = read_cloud_with(&path, &l).unwrap_err().to_string();
+            assert!(e.contains(name) && e.contains("over the limit of 49 (OBJVIEW_MAX_POINTS"), "{e}");
+        }
+        // A header claiming 2^40 points in a small file fails at once.
+        let hdr = "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 1099511627776\nDATA binary\n";
+        let e = read_cloud(&write(&dir, "h.pcd", hdr.as_bytes())).unwrap_err().to_string();
+        assert!(e.contains("h.pcd") && e.contains("1099511627776"), "{e}");
+        let mut npy = crate::npy::npy_header("<f8", &[1 << 40, 3]);
+        npy.extend([0u8; 48]);
+        let e = read_cloud(&write(&dir, "h.npy", &npy)).unwrap_err().to_string();
+        assert!(e.contains("h.npy") && e.contains("truncated"), "{e}");
+    }
+
+    #[test]
+    fn archive_members_and_compressed_blocks_inflate_within_the_limit() {
+        let dir = tempfile::tempdir().unwrap();
+        // A zip bomb: 16 MiB of zeros after a valid header for 699 050 points, deflated to a
+        // few KB.
+        let n = (16 << 20) / 24;
+        let mut npy = crate::npy::npy_header("<f8", &[n, 3]);
+        npy.resize(npy.len() + 24 * n, 0);
+        let path = dir.path().join("bomb.npz");
+        let mut z = zip::ZipWriter::new(std::fs::File::create(&path).unwrap());
+        let opt =
+            zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
+        z.start_file("points.npy", opt).unwrap();
+        z.write_all(&npy).unwrap();
+        z.finish().unwrap();
+        assert!(std::fs::metadata(&path).unwrap().len() < 1 << 20);
+        let l = Limits { max_decompressed_bytes: 1 << 20, ..Limits::default() };
+        let e = read_cloud_with(&path, &l).unwrap_err().to_string();
+        assert!(
+            e.contains("bomb.npz")
+                && e.contains("inflates to")
+                && e.contains("OBJVIEW_MAX_DECOMPRESSED_BYTES"),
+            "{e}"
+        );
+        assert_eq!(read_cloud_with(&path, &Limits::default()).unwrap().len(), n);
+
+        // PCD binary_compressed: a declared size over the limit, and one LZF cannot reach.
+        let mut b = b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 1000\nDATA binary_compressed\n".to_vec();
+        b.extend(4u32.to_le_bytes());
+        b.extend(12000u32.to_le_bytes());
+        b.extend([0u8; 4]);
+        let e = read_cloud_with(
+            &write(&dir, "c.pcd", &b),
+            &Limits { max_decompressed_bytes: 11999, ..Limits::default() },
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("c.pcd") && e.contains("inflates to 12000 bytes, over the limit of 11999"), "{e}");
+        let e = read_cloud(&write(&dir, "c.pcd", &b)).unwrap_err().to_string();
+        assert!(e.contains("4 compressed bytes cannot expand to the declared 12000"), "{e}");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn fifos_and_device_links_are_refused_for_every_cloud_format() {
+        use crate::test_support::{mkfifo, symlink, within};
+        let dir = tempfile::tempdir().unwrap();
+        for ext in CLOUD_EXTENSIONS {
+            let fifo = mkfifo(&dir.path().join(format!("f.{ext}")));
+            let e = within(10, move || read_cloud(&fifo)).unwrap_err().to_string();
+            assert!(e.contains(&format!("f.{ext}")) && e.contains("not a regular file (it is a FIFO"), "{e}");
+            let zero = symlink(Path::new("/dev/zero"), &dir.path().join(format!("z.{ext}")));
+            let e = within(10, move || read_cloud(&zero)).unwrap_err().to_string();
+            assert!(e.contains(&format!("z.{ext}")) && e.contains("character device"), "{e}");
+        }
+        // The same holds for read_npy_f64.
+        let e = within(10, {
+            let p = dir.path().join("f.npy");
+            move || crate::npy::read_npy_f64(&p)
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("FIFO"), "{e}");
     }
 
     /// Axis-aligned box [0,a]×[0,b]×[0,c] as 12 triangles.

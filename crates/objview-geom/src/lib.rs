@@ -6,12 +6,15 @@
 //! plain types defined here: [`Mesh`], [`Pose`] and point clouds as `Vec<[f64; 3]>`.
 
 pub mod error;
+pub mod fsutil;
 pub mod hash;
+pub mod limits;
 pub mod mesh;
 pub mod pose;
 pub mod stats;
 
 pub use error::GeomError;
+pub use limits::Limits;
 pub use mesh::{Appearance, Mesh};
 pub use pose::Pose;
 
@@ -23,5 +26,7 @@ pub mod io;
 pub mod normalize;
 pub mod npy;
 pub mod synth;
+#[cfg(test)]
+pub(crate) mod test_support;
 pub mod vec3;
 pub mod write;

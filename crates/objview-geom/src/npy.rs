@@ -3,8 +3,10 @@
 //! The CLI writes depth maps and point arrays as `.npy` so that Python users of the benchmark
 //! can `np.load` them directly, and ground-truth clouds may come as `.npy`/`.npz` (SPEC §1).
 //! Only what the project needs is supported: little-endian `<f4`, `<f8` and `<u4` written in
-//! C order; `<f4`/`<f8` read (format versions 1.0, 2.0 and 3.0 headers are accepted).
+//! C order; `<f4`/`<f8` read (format versions 1.0, 2.0 and 3.0 headers are accepted). The
+//! shape is checked against the data present before anything is allocated.
 
+use crate::limits::Limits;
 use crate::GeomError;
 use std::io::Write;
 use std::path::Path;
@@ -69,9 +71,15 @@ pub fn write_npy_u32(path: &Path, shape: &[usize], data: &[u32]) -> Result<(), G
     write_npy(path, "<u4", shape, data.len(), |i| data[i].to_le_bytes())
 }
 
-/// Reads a `.npy` file of `<f4` or `<f8` values: `(shape, values in C order)`.
+/// Reads a `.npy` file of `<f4` or `<f8` values: `(shape, values in C order)`, as a regular
+/// file within [`Limits::global`]'s `max_file_bytes` (see [`crate::fsutil`]).
 pub fn read_npy_f64(path: &Path) -> Result<(Vec<usize>, Vec<f64>), GeomError> {
-    let bytes = std::fs::read(path).map_err(|e| GeomError::io(path, e))?;
+    read_npy_f64_with(path, Limits::for_file(path)?)
+}
+
+/// [`read_npy_f64`] within explicit `limits`.
+pub fn read_npy_f64_with(path: &Path, limits: &Limits) -> Result<(Vec<usize>, Vec<f64>), GeomError> {
+    let bytes = crate::io::read_input(path, limits)?;
     parse_npy_f64(path, &bytes)
 }
 

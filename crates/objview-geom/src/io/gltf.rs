@@ -17,13 +17,22 @@
 //! colours are ignored; a document whose textures have no `source` (WebP/Basis images given
 //! only by an extension) is loaded without textures. Geometry-compression extensions (Draco, meshopt) are reported
 //! as unsupported.
+//!
+//! Untrusted documents: the node graph must be a forest as glTF 2.0 requires (a node has at
+//! most one parent and is listed once in its children array, no cycles, a scene root is no
+//! node's child), so expansion is linear in the document; node instances, vertices and
+//! triangles are capped by the [`Limits`]. External buffers and images are read only when a
+//! primitive or a used material needs them, only from inside the asset's folder
+//! ([`crate::fsutil::resolve_inside`]) and only as size-capped regular files.
 
+use crate::limits::{over, Limits, Which};
 use crate::mesh::{Appearance, Material, Texture};
 use crate::{GeomError, Mesh};
 use ::gltf::accessor::{DataType, Dimensions};
 use ::gltf::json::validation::Validate;
 use ::gltf::mesh::Mode;
 use std::borrow::Cow;
+use std::cell::OnceCell;
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -32,8 +41,8 @@ const CHUNK_JSON: u32 = 0x4E4F_534A;
 const CHUNK_BIN: u32 = 0x004E_4942;
 
 /// Loads a glTF or GLB file. The caller validates the result.
-pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
-    let bytes = super::read_bytes(path)?;
+pub(super) fn load(path: &Path, limits: &Limits) -> Result<Mesh, GeomError> {
+    let bytes = super::read_input(path, limits)?;
     let (json, blob) = if bytes.starts_with(GLB_MAGIC) {
         split_glb(path, &bytes)?
     } else {
@@ -57,8 +66,8 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
         }
     };
     let doc = ::gltf::Document::from_json_without_validation(root);
-    let buffers = resolve_buffers(path, &doc, blob)?;
-    Loader::new(path, &doc, &buffers).run()
+    let buffers = Buffers { blob, data: doc.buffers().map(|_| OnceCell::new()).collect() };
+    Loader::new(path, limits, &doc, &buffers).run()
 }
 
 /// Splits a GLB container into its JSON chunk and optional BIN chunk.
@@ -156,26 +165,6 @@ fn validate(path: &Path, root: &::gltf::json::Root) -> Result<(), GeomError> {
     Ok(())
 }
 
-/// Decodes `%XX` escapes of a relative URI.
-fn percent_decode(s: &str) -> Vec<u8> {
-    let hex = |c: u8| (c as char).to_digit(16).map(|d| d as u8);
-    let b = s.as_bytes();
-    let mut out = Vec::with_capacity(b.len());
-    let mut i = 0;
-    while i < b.len() {
-        if b[i] == b'%' && i + 2 < b.len() {
-            if let (Some(h), Some(l)) = (hex(b[i + 1]), hex(b[i + 2])) {
-                out.push(h * 16 + l);
-                i += 3;
-                continue;
-            }
-        }
-        out.push(b[i]);
-        i += 1;
-    }
-    out
-}
-
 /// Standard base64 decoding (padding optional, whitespace ignored); `None` on a bad symbol.
 fn base64_decode(s: &str) -> Option<Vec<u8>> {
     let mut out = Vec::with_capacity(s.len() / 4 * 3);
@@ -201,8 +190,18 @@ fn base64_decode(s: &str) -> Option<Vec<u8>> {
     Some(out)
 }
 
-/// Reads the bytes a URI points to: a `data:` URI or a file relative to the glTF file.
-fn read_uri(path: &Path, uri: &str) -> Result<Vec<u8>, String> {
+/// The reason of an error about a referenced file, without the asset's name (the caller's
+/// error names it).
+fn reason(e: GeomError) -> String {
+    match e {
+        GeomError::Parse { reason, .. } | GeomError::Invalid { reason, .. } => reason,
+        e => e.to_string(),
+    }
+}
+
+/// Reads the bytes a URI points to: a `data:` URI, or a file inside the glTF file's folder
+/// (a size-capped regular file, see [`crate::fsutil`]).
+fn read_uri(path: &Path, uri: &str, limits: &Limits) -> Result<Vec<u8>, String> {
     if let Some(rest) = uri.strip_prefix("data:") {
         let Some((_, data)) = rest.split_once(";base64,") else {
             return Err("data URI is not base64".into());
@@ -212,37 +211,49 @@ fn read_uri(path: &Path, uri: &str) -> Result<Vec<u8>, String> {
     if uri.contains("://") {
         return Err(format!("unsupported URI scheme in '{uri}'"));
     }
-    let rel = String::from_utf8(percent_decode(uri)).map_err(|_| format!("bad URI '{uri}'"))?;
-    let file = path.parent().unwrap_or(Path::new("")).join(rel);
-    std::fs::read(&file).map_err(|e| format!("cannot read {}: {e}", file.display()))
+    let file = crate::fsutil::resolve_inside(path, uri).map_err(reason)?;
+    super::read_referenced(&file, limits).map_err(reason)
 }
 
-/// The data of every buffer, or why it is unavailable (reported only if geometry needs it).
-type Buffers<'a> = Vec<Result<Cow<'a, [u8]>, String>>;
+/// The document's buffers, each read on first use: a buffer that no primitive or used image
+/// needs is never read.
+struct Buffers<'b> {
+    /// The GLB BIN chunk.
+    blob: Option<&'b [u8]>,
+    /// Per buffer: its data, or why it is unavailable (reported only if geometry needs it).
+    data: Vec<OnceCell<Result<Cow<'b, [u8]>, String>>>,
+}
 
-fn resolve_buffers<'a>(
-    path: &Path,
-    doc: &::gltf::Document,
-    blob: Option<&'a [u8]>,
-) -> Result<Buffers<'a>, GeomError> {
-    Ok(doc
-        .buffers()
-        .map(|b| {
-            let data: Result<Cow<'a, [u8]>, String> = match b.source() {
+impl<'b> Buffers<'b> {
+    /// The data of `buffer`, read now if it has not been yet.
+    fn get(&self, path: &Path, limits: &Limits, buffer: &::gltf::Buffer) -> Result<&[u8], &str> {
+        let Some(cell) = self.data.get(buffer.index()) else {
+            return Err("buffer index out of range");
+        };
+        let data = cell.get_or_init(|| {
+            let data: Cow<'b, [u8]> = match buffer.source() {
                 ::gltf::buffer::Source::Bin => {
-                    blob.map(Cow::Borrowed).ok_or_else(|| "GLB has no BIN chunk".to_string())
+                    Cow::Borrowed(self.blob.ok_or_else(|| "GLB has no BIN chunk".to_string())?)
                 }
-                ::gltf::buffer::Source::Uri(uri) => read_uri(path, uri).map(Cow::Owned),
+                ::gltf::buffer::Source::Uri(uri) => Cow::Owned(
+                    read_uri(path, uri, limits).map_err(|e| format!("buffer {}: {e}", buffer.index()))?,
+                ),
             };
-            data.and_then(|d| {
-                if d.len() < b.length() {
-                    Err(format!("buffer {} has {} bytes, declares {}", b.index(), d.len(), b.length()))
-                } else {
-                    Ok(d)
-                }
-            })
-        })
-        .collect())
+            if data.len() < buffer.length() {
+                return Err(format!(
+                    "buffer {} has {} bytes, declares {}",
+                    buffer.index(),
+                    data.len(),
+                    buffer.length()
+                ));
+            }
+            Ok(data)
+        });
+        match data {
+            Ok(d) => Ok(d.as_ref()),
+            Err(e) => Err(e.as_str()),
+        }
+    }
 }
 
 /// A column-major 4×4 affine transform in f64.
@@ -324,8 +335,17 @@ fn read_component(s: &[u8], t: DataType, normalized: bool) -> f64 {
     }
 }
 
+/// Where an image's bytes come from, to decode each source once.
+#[derive(PartialEq, Eq, Hash)]
+enum ImageKey {
+    /// (buffer index, byte offset, byte length) of a buffer view.
+    View(usize, usize, usize),
+    Uri(String),
+}
+
 struct Loader<'a, 'b> {
     path: &'a Path,
+    limits: &'a Limits,
     doc: &'a ::gltf::Document,
     buffers: &'a Buffers<'b>,
     positions: Vec<[f64; 3]>,
@@ -334,10 +354,14 @@ struct Loader<'a, 'b> {
     face_material: Vec<u32>,
     materials: Vec<Material>,
     textures: Vec<Texture>,
+    /// Bytes of the decoded textures so far (against [`Limits::max_texture_bytes`]).
+    texture_bytes: u64,
     /// (glTF material index or None for the default material, textured?) -> our index.
     material_index: HashMap<(Option<usize>, bool), u32>,
     /// glTF image index -> decoded texture index (None: not decodable).
     image_cache: HashMap<usize, Option<usize>>,
+    /// Image source -> decoded texture index, so that images sharing a source decode once.
+    source_cache: HashMap<ImageKey, Option<usize>>,
     /// Scratch buffers reused across primitives.
     prim_pos: Vec<[f64; 3]>,
     prim_uv: Vec<[f64; 2]>,
@@ -345,9 +369,10 @@ struct Loader<'a, 'b> {
 }
 
 impl<'a, 'b> Loader<'a, 'b> {
-    fn new(path: &'a Path, doc: &'a ::gltf::Document, buffers: &'a Buffers<'b>) -> Self {
+    fn new(path: &'a Path, limits: &'a Limits, doc: &'a ::gltf::Document, buffers: &'a Buffers<'b>) -> Self {
         Loader {
             path,
+            limits,
             doc,
             buffers,
             positions: Vec::new(),
@@ -356,8 +381,10 @@ impl<'a, 'b> Loader<'a, 'b> {
             face_material: Vec::new(),
             materials: Vec::new(),
             textures: Vec::new(),
+            texture_bytes: 0,
             material_index: HashMap::new(),
             image_cache: HashMap::new(),
+            source_cache: HashMap::new(),
             prim_pos: Vec::new(),
             prim_uv: Vec::new(),
             prim_idx: Vec::new(),
@@ -368,29 +395,100 @@ impl<'a, 'b> Loader<'a, 'b> {
         GeomError::parse(self.path, reason)
     }
 
-    fn run(mut self) -> Result<Mesh, GeomError> {
-        let doc = self.doc;
-        // Root nodes: of the default scene, else of every scene, else every node that is no
-        // other node's child (a document without scenes).
-        let mut roots: Vec<::gltf::Node> = match doc.default_scene() {
-            Some(s) => s.nodes().collect(),
-            None => doc.scenes().flat_map(|s| s.nodes()).collect(),
-        };
-        if doc.scenes().len() == 0 {
-            let mut is_child = vec![false; doc.nodes().len()];
-            for n in doc.nodes() {
-                for c in n.children() {
-                    is_child[c.index()] = true;
+    /// The parent of each node, after checking that the nodes form a forest as glTF 2.0
+    /// requires: a node has at most one parent, a parent lists a child once, and there is no
+    /// cycle. A shared child would be expanded once per path to it (exponentially many).
+    fn parents(&self) -> Result<Vec<Option<usize>>, GeomError> {
+        let n = self.doc.nodes().len();
+        let mut parent: Vec<Option<usize>> = vec![None; n];
+        for node in self.doc.nodes() {
+            let p = node.index();
+            for child in node.children() {
+                let c = child.index();
+                match parent[c] {
+                    Some(q) if q == p => {
+                        return Err(self.err(format!("invalid glTF: node {p} lists child {c} twice")));
+                    }
+                    Some(q) => {
+                        return Err(self.err(format!(
+                            "invalid glTF: node {c} has more than one parent (nodes {q} and {p}); \
+                             the node hierarchy must be a tree"
+                        )));
+                    }
+                    None => parent[c] = Some(p),
                 }
             }
-            roots = doc.nodes().filter(|n| !is_child[n.index()]).collect();
         }
-        let max_depth = doc.nodes().len();
-        let mut stack: Vec<(::gltf::Node, Mat4, usize)> =
-            roots.into_iter().rev().map(|n| (n, IDENTITY, 0)).collect();
-        while let Some((node, parent, depth)) = stack.pop() {
-            if depth > max_depth {
-                return Err(self.err("invalid glTF: node hierarchy contains a cycle".into()));
+        // Cycles: walk up from every node; 1 = on the current walk, 2 = known to reach a root.
+        let mut state = vec![0u8; n];
+        let mut walk = Vec::new();
+        for start in 0..n {
+            let mut v = start;
+            walk.clear();
+            loop {
+                match state[v] {
+                    1 => {
+                        return Err(self
+                            .err(format!("invalid glTF: node hierarchy contains a cycle through node {v}")));
+                    }
+                    2 => break,
+                    _ => {}
+                }
+                state[v] = 1;
+                walk.push(v);
+                match parent[v] {
+                    Some(p) => v = p,
+                    None => break,
+                }
+            }
+            for &w in &walk {
+                state[w] = 2;
+            }
+        }
+        Ok(parent)
+    }
+
+    fn run(mut self) -> Result<Mesh, GeomError> {
+        let doc = self.doc;
+        let parent = self.parents()?;
+        // Root nodes: of the default scene, else of every scene, else every node that is no
+        // other node's child (a document without scenes).
+        let scenes: Vec<::gltf::Scene> = match doc.default_scene() {
+            Some(s) => vec![s],
+            None => doc.scenes().collect(),
+        };
+        let mut roots: Vec<::gltf::Node> = Vec::new();
+        for scene in &scenes {
+            let mut listed = std::collections::HashSet::new();
+            for node in scene.nodes() {
+                let r = node.index();
+                if let Some(p) = parent[r] {
+                    return Err(self.err(format!(
+                        "invalid glTF: node {r} is a root of scene {} and also a child of node {p}",
+                        scene.index()
+                    )));
+                }
+                if !listed.insert(r) {
+                    return Err(
+                        self.err(format!("invalid glTF: scene {} lists node {r} twice", scene.index()))
+                    );
+                }
+                roots.push(node);
+            }
+        }
+        if doc.scenes().len() == 0 {
+            roots = doc.nodes().filter(|n| parent[n.index()].is_none()).collect();
+        }
+        let mut instances: u64 = 0;
+        let mut stack: Vec<(::gltf::Node, Mat4)> = roots.into_iter().rev().map(|n| (n, IDENTITY)).collect();
+        while let Some((node, parent)) = stack.pop() {
+            instances += 1;
+            if instances > self.limits.max_gltf_nodes {
+                let o = over(Which::GltfNodes, self.limits.max_gltf_nodes);
+                return Err(GeomError::invalid(
+                    self.path,
+                    format!("the scene graph has too many node instances, {o}"),
+                ));
             }
             let local = node.transform().matrix().map(|c| c.map(|v| v as f64));
             let world = mat_mul(&parent, &local);
@@ -400,7 +498,7 @@ impl<'a, 'b> Loader<'a, 'b> {
                 }
             }
             for child in node.children().collect::<Vec<_>>().into_iter().rev() {
-                stack.push((child, world, depth + 1));
+                stack.push((child, world));
             }
         }
         let appearance = if doc.materials().len() == 0 {
@@ -426,8 +524,8 @@ impl<'a, 'b> Loader<'a, 'b> {
         elem: usize,
     ) -> Result<(&'a [u8], usize), GeomError> {
         let buffers: &'a Buffers<'b> = self.buffers;
-        let data = match &buffers[view.buffer().index()] {
-            Ok(d) => d.as_ref(),
+        let data = match buffers.get(self.path, self.limits, &view.buffer()) {
+            Ok(d) => d,
             Err(why) => return Err(self.err(format!("{what}: {why}"))),
         };
         let stride = view.stride().unwrap_or(elem);
@@ -490,8 +588,8 @@ impl<'a, 'b> Loader<'a, 'b> {
             None => {
                 // Zero-initialized (sparse-only) accessor: refuse counts no buffer could back,
                 // so a lying header cannot exhaust memory.
-                let bytes: usize = self.doc.buffers().map(|b| b.length()).sum();
-                if count > bytes.saturating_add(1) {
+                let bytes = self.doc.buffers().fold(0usize, |a, b| a.saturating_add(b.length()));
+                if count > bytes.saturating_add(1) || count as u64 > self.limits.max_vertices {
                     return Err(
                         self.err(format!("{what}: accessor without a buffer view claims {count} elements"))
                     );
@@ -573,6 +671,12 @@ impl<'a, 'b> Loader<'a, 'b> {
         if base + nv > u32::MAX as usize {
             return Err(GeomError::invalid(self.path, "more than 2^32 vertices"));
         }
+        let added = match mode {
+            Mode::Triangles => self.prim_idx.len() / 3,
+            _ => self.prim_idx.len().saturating_sub(2),
+        };
+        // The limits, before the instance is materialized.
+        super::check_counts(self.path, base + nv, self.triangles.len() + added, self.limits)?;
         self.positions.extend(pos.iter().map(|&p| transform_point(world, p)));
         self.prim_pos = pos;
 
@@ -595,7 +699,7 @@ impl<'a, 'b> Loader<'a, 'b> {
             if let Some(acc) = prim.get(&::gltf::Semantic::TexCoords(info.tex_coord())) {
                 if acc.count() == nv {
                     self.read_vec::<2>(&format!("{what} TEXCOORD_{}", info.tex_coord()), &acc, &mut uv)?;
-                    texture = self.texture(info.texture().source());
+                    texture = self.texture(info.texture().source())?;
                     textured = texture.is_some();
                 }
             }
@@ -649,35 +753,56 @@ impl<'a, 'b> Loader<'a, 'b> {
         Ok(())
     }
 
-    /// Decodes an image once; `None` when its data is unavailable or not PNG/JPEG.
-    fn texture(&mut self, image: ::gltf::Image) -> Option<usize> {
+    /// Decodes an image once; `None` when its data is unavailable (missing, outside the
+    /// asset's folder, not a regular file, over the size limit) or not PNG/JPEG. Errors only
+    /// when the decoded textures would exceed [`Limits::max_texture_bytes`].
+    fn texture(&mut self, image: ::gltf::Image) -> Result<Option<usize>, GeomError> {
         if let Some(&t) = self.image_cache.get(&image.index()) {
-            return t;
+            return Ok(t);
+        }
+        let key = match image.source() {
+            ::gltf::image::Source::View { view, .. } => {
+                ImageKey::View(view.buffer().index(), view.offset(), view.length())
+            }
+            ::gltf::image::Source::Uri { uri, .. } => ImageKey::Uri(uri.to_string()),
+        };
+        if let Some(&t) = self.source_cache.get(&key) {
+            self.image_cache.insert(image.index(), t);
+            return Ok(t);
         }
         let bytes: Option<Cow<[u8]>> = match image.source() {
             ::gltf::image::Source::View { view, .. } => {
-                let data = self.buffers[view.buffer().index()].as_ref().ok();
+                let data = self.buffers.get(self.path, self.limits, &view.buffer()).ok();
                 data.and_then(|d| d.get(view.offset()..view.offset().saturating_add(view.length())))
                     .map(Cow::Borrowed)
             }
-            ::gltf::image::Source::Uri { uri, .. } => read_uri(self.path, uri).ok().map(Cow::Owned),
+            ::gltf::image::Source::Uri { uri, .. } => {
+                read_uri(self.path, uri, self.limits).ok().map(Cow::Owned)
+            }
         };
-        let tex = bytes.and_then(|b| super::decode_texture(&b)).map(|t| {
+        let decoded = match bytes {
+            Some(b) => super::decode_texture(self.path, &b, &mut self.texture_bytes, self.limits)?,
+            None => None,
+        };
+        let tex = decoded.map(|t| {
             self.textures.push(t);
             self.textures.len() - 1
         });
         self.image_cache.insert(image.index(), tex);
-        tex
+        self.source_cache.insert(key, tex);
+        Ok(tex)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::base64_decode;
-    use crate::io::load_mesh;
+    use crate::io::{load_mesh, load_mesh_with};
+    use crate::limits::Limits;
     use crate::mesh::Appearance;
+    use crate::test_support::within;
     use serde_json::{json, Value};
-    use std::path::PathBuf;
+    use std::path::{Path, PathBuf};
 
     /// A GLB container around `doc` and `bin`, assembled by hand per the GLB spec.
     fn glb(doc: &Value, bin: &[u8]) -> Vec<u8> {
@@ -996,5 +1121,230 @@ mod tests {
         tt["extensionsRequired"] = json!(["KHR_mesh_quantization"]);
         tt["extensionsUsed"] = json!(["KHR_mesh_quantization"]);
         assert!(load_mesh(&write(&dir, "q.glb", &glb(&tt, &bin))).is_ok());
+    }
+
+    #[test]
+    fn shared_or_repeated_children_are_rejected_before_any_expansion() {
+        let dir = tempfile::tempdir().unwrap();
+        let check = |nodes: Value, scenes: Value, want: &str| {
+            let (doc, bin) = triangle_doc([0, 1, 2], nodes, scenes);
+            let p = write(&dir, "bad.glb", &glb(&doc, &bin));
+            let e = within(20, move || load_mesh(&p).map(|m| m.triangles.len())).unwrap_err().to_string();
+            assert!(e.contains("bad.glb") && e.contains(want), "{e}");
+        };
+        // Node i lists child i + 1 twice: 2^depth instances. Depth 3 first (the old loader
+        // returned 15 triangles), then the reported 40-level bomb (it aborted on allocation).
+        for depth in [3, 40] {
+            let nodes: Vec<Value> = (0..=depth)
+                .map(|i| {
+                    if i < depth {
+                        json!({"mesh": 0, "children": [i + 1, i + 1]})
+                    } else {
+                        json!({"mesh": 0})
+                    }
+                })
+                .collect();
+            check(json!(nodes), json!([{"nodes": [0]}]), "node 0 lists child 1 twice");
+        }
+        // Diamond: nodes 1 and 2 both list node 3.
+        let diamond = json!([{"children": [1, 2]}, {"children": [3]}, {"children": [3]}, {"mesh": 0}]);
+        check(diamond, json!([{"nodes": [0]}]), "node 3 has more than one parent (nodes 1 and 2)");
+        // A scene root that is also a child.
+        let nodes = json!([{"mesh": 0, "children": [1]}, {"mesh": 0}]);
+        check(
+            nodes.clone(),
+            json!([{"nodes": [0, 1]}]),
+            "node 1 is a root of scene 0 and also a child of node 0",
+        );
+        // A scene that lists its root twice (each listing was an instance).
+        check(nodes, json!([{"nodes": [0, 0]}]), "scene 0 lists node 0 twice");
+        // A cycle not reachable from the scene is an error too.
+        let cyc = json!([{"mesh": 0}, {"children": [2]}, {"children": [1]}]);
+        check(cyc, json!([{"nodes": [0]}]), "cycle through node 1");
+    }
+
+    #[test]
+    fn node_instances_triangles_and_vertices_are_capped_by_the_limits() {
+        let dir = tempfile::tempdir().unwrap();
+        // A tree of three nodes instancing the one-triangle mesh: 3 instances, 3 triangles,
+        // 9 vertices.
+        let nodes =
+            json!([{"mesh": 0, "children": [1, 2]}, {"mesh": 0}, {"mesh": 0, "translation": [0, 0, 1]}]);
+        let (doc, bin) = triangle_doc([0, 1, 2], nodes, json!([{"nodes": [0]}]));
+        let p = write(&dir, "tree.glb", &glb(&doc, &bin));
+        assert_eq!(load_mesh_with(&p, &Limits::default()).unwrap().triangles.len(), 3);
+        let at = |l: Limits| load_mesh_with(&p, &l).unwrap_err().to_string();
+        let d = Limits::default();
+        let e = at(Limits { max_gltf_nodes: 2, ..d });
+        assert!(
+            e.contains("tree.glb") && e.contains("node instances") && e.contains("OBJVIEW_MAX_GLTF_NODES"),
+            "{e}"
+        );
+        let e = at(Limits { max_triangles: 2, ..d });
+        assert!(e.contains("3 triangles, over the limit of 2 (OBJVIEW_MAX_TRIANGLES raises it)"), "{e}");
+        let e = at(Limits { max_vertices: 8, ..d });
+        assert!(e.contains("9 vertices, over the limit of 8 (OBJVIEW_MAX_VERTICES"), "{e}");
+        assert!(
+            load_mesh_with(&p, &Limits { max_gltf_nodes: 3, max_triangles: 3, max_vertices: 9, ..d }).is_ok()
+        );
+    }
+
+    /// `dir/asset/` holding `a.gltf` whose buffer 0 has `uri`, and `dir/outside/secret.bin`
+    /// holding the same valid triangle data; returns the .gltf path.
+    fn asset_with_buffer_uri(dir: &Path, uri: &str) -> PathBuf {
+        let (mut doc, bin) = triangle_doc([0, 1, 2], json!([{"mesh": 0}]), json!([{"nodes": [0]}]));
+        std::fs::create_dir_all(dir.join("asset")).unwrap();
+        std::fs::create_dir_all(dir.join("outside")).unwrap();
+        std::fs::write(dir.join("outside/secret.bin"), &bin).unwrap();
+        std::fs::write(dir.join("asset/inside.bin"), &bin).unwrap();
+        doc["buffers"][0]["uri"] = json!(uri);
+        let p = dir.join("asset/a.gltf");
+        std::fs::write(&p, serde_json::to_vec(&doc).unwrap()).unwrap();
+        p
+    }
+
+    #[test]
+    fn buffer_uris_cannot_leave_the_asset_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let secret = d.join("outside/secret.bin");
+        let absolute = secret.display().to_string();
+        for (uri, want) in [
+            ("../outside/secret.bin", "'..' is not allowed"),
+            ("%2e%2e/outside/secret.bin", "'..' is not allowed"),
+            ("%2E%2E%2Foutside%2Fsecret.bin", "'..' is not allowed"),
+            ("sub/..\\../outside/secret.bin", "'..' is not allowed"),
+            (absolute.as_str(), "absolute paths are not allowed"),
+            ("/proc/self/environ", "absolute paths are not allowed"),
+        ] {
+            let p = asset_with_buffer_uri(d, uri);
+            let e = load_mesh(&p).unwrap_err().to_string();
+            assert!(e.contains("a.gltf") && e.contains(want), "{uri}: {e}");
+        }
+        // Symlinks: to a file outside, or through a linked folder, refused; inside, followed.
+        #[cfg(unix)]
+        {
+            use crate::test_support::symlink;
+            symlink(&secret, &d.join("asset/link.bin"));
+            symlink(&d.join("outside"), &d.join("asset/linked"));
+            symlink(&d.join("asset/inside.bin"), &d.join("asset/good.bin"));
+            for uri in ["link.bin", "linked/secret.bin"] {
+                let e = load_mesh(&asset_with_buffer_uri(d, uri)).unwrap_err().to_string();
+                assert!(e.contains("a.gltf") && e.contains("outside the asset's folder"), "{uri}: {e}");
+            }
+            let m = load_mesh(&asset_with_buffer_uri(d, "good.bin")).unwrap();
+            assert_eq!(m.triangle(0)[1], [1.0, 0.0, 0.0]);
+        }
+        // The same file named inside the folder loads.
+        assert!(load_mesh(&asset_with_buffer_uri(d, "./inside.bin")).is_ok());
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn special_files_as_buffers_are_never_opened_unless_used_and_then_refused() {
+        use crate::test_support::{mkfifo, symlink};
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path().to_path_buf();
+        mkfifo(&d.join("fifo.bin"));
+        symlink(Path::new("/dev/zero"), &d.join("zero.bin"));
+        let (mut doc, bin) = triangle_doc([0, 1, 2], json!([{"mesh": 0}]), json!([{"nodes": [0]}]));
+        write(&dir, "tri.bin", &bin);
+        // Unused buffers: a FIFO, /dev/zero directly, /dev/zero through a link (each would
+        // block or read without end if opened).
+        doc["buffers"] = json!([
+            {"uri": "tri.bin", "byteLength": 42},
+            {"uri": "fifo.bin", "byteLength": 8},
+            {"uri": "/dev/zero", "byteLength": 8},
+            {"uri": "zero.bin", "byteLength": 8}
+        ]);
+        let p = write(&dir, "unused.gltf", &serde_json::to_vec(&doc).unwrap());
+        let m = within(10, move || load_mesh(&p).map(|m| m.triangles.len()));
+        assert_eq!(m.unwrap(), 1);
+        // Used: refused with the reason, without blocking.
+        for (k, want) in [
+            (1, "not a regular file (it is a FIFO"),
+            (2, "absolute paths"),
+            (3, "outside the asset's folder"),
+        ] {
+            let mut used = doc.clone();
+            used["bufferViews"][0]["buffer"] = json!(k);
+            used["buffers"][k]["byteLength"] = json!(42);
+            let p = write(&dir, "used.gltf", &serde_json::to_vec(&used).unwrap());
+            let e = within(10, move || load_mesh(&p).map(|m| m.triangles.len())).unwrap_err().to_string();
+            assert!(e.contains("used.gltf") && e.contains(want), "{e}");
+        }
+        // An oversized referenced file is refused by its size, before it is read.
+        let p = d.join("tri.gltf");
+        std::fs::write(&p, serde_json::to_vec(&triangle_doc_with_uri("tri.bin")).unwrap()).unwrap();
+        let l = Limits { max_referenced_bytes: 41, ..Limits::default() };
+        let e = load_mesh_with(&p, &l).unwrap_err().to_string();
+        assert!(e.contains("file of 42 bytes is over the limit of 41 (OBJVIEW_MAX_REFERENCED_BYTES"), "{e}");
+    }
+
+    fn triangle_doc_with_uri(uri: &str) -> Value {
+        let (mut doc, _) = triangle_doc([0, 1, 2], json!([{"mesh": 0}]), json!([{"nodes": [0]}]));
+        doc["buffers"][0]["uri"] = json!(uri);
+        doc
+    }
+
+    #[test]
+    fn images_outside_the_folder_or_special_are_not_read_and_textures_are_capped() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        std::fs::create_dir_all(d.join("asset")).unwrap();
+        std::fs::create_dir_all(d.join("outside")).unwrap();
+        let img = image::RgbImage::from_raw(2, 1, vec![255, 0, 0, 0, 255, 0]).unwrap();
+        img.save(d.join("outside/tex.png")).unwrap();
+        img.save(d.join("asset/tex.png")).unwrap();
+        let mut bin = f32s(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
+        bin.extend(f32s(&[0.25, 0.5, 0.75, 0.5, 0.25, 0.5]));
+        std::fs::write(d.join("asset/g.bin"), &bin).unwrap();
+        let doc = |image_uri: &str| {
+            json!({
+                "asset": {"version": "2.0"},
+                "scenes": [{"nodes": [0]}],
+                "nodes": [{"mesh": 0}],
+                "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "material": 0}]}],
+                "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+                "textures": [{"source": 0}],
+                "images": [{"uri": image_uri}],
+                "buffers": [{"uri": "g.bin", "byteLength": 60}],
+                "bufferViews": [
+                    {"buffer": 0, "byteOffset": 0, "byteLength": 36},
+                    {"buffer": 0, "byteOffset": 36, "byteLength": 24}
+                ],
+                "accessors": [
+                    {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                     "min": [0, 0, 0], "max": [1, 1, 0]},
+                    {"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC2"}
+                ]
+            })
+        };
+        let textures = |uri: &str, limits: Limits| {
+            let p = d.join("asset/t.gltf");
+            std::fs::write(&p, serde_json::to_vec(&doc(uri)).unwrap()).unwrap();
+            within(10, move || {
+                load_mesh_with(&p, &limits).map(|m| match m.appearance {
+                    Appearance::Textured { textures, .. } => textures.len(),
+                    _ => usize::MAX,
+                })
+            })
+        };
+        let l = Limits::default();
+        assert_eq!(textures("tex.png", l).unwrap(), 1);
+        assert_eq!(textures("../outside/tex.png", l).unwrap(), 0);
+        assert_eq!(textures(&d.join("outside/tex.png").display().to_string(), l).unwrap(), 0);
+        #[cfg(unix)]
+        {
+            crate::test_support::mkfifo(&d.join("asset/fifo.png"));
+            assert_eq!(textures("fifo.png", l).unwrap(), 0);
+        }
+        // The 2x1 texture decodes to 6 bytes.
+        assert_eq!(textures("tex.png", Limits { max_texture_bytes: 6, ..l }).unwrap(), 1);
+        let e = textures("tex.png", Limits { max_texture_bytes: 5, ..l }).unwrap_err().to_string();
+        assert!(
+            e.contains("t.gltf") && e.contains("6 bytes, over the limit of 5 (OBJVIEW_MAX_TEXTURE_BYTES"),
+            "{e}"
+        );
     }
 }

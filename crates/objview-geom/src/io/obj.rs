@@ -6,13 +6,21 @@
 //! otherwise `Kd` colours give [`Appearance::FaceColors`]. A missing or unreadable .mtl or
 //! texture is not an error — it only means the mesh has no colour (the pool's own OBJ files
 //! ship without their .mtl, SPEC §1).
+//!
+//! Referenced files are untrusted: an `mtllib` is read only from inside the OBJ file's folder
+//! and a `map_Kd` only from inside the .mtl's (or the OBJ's) folder
+//! ([`crate::fsutil::resolve_inside`]: no absolute paths, no `..`, symlinks only to targets
+//! inside), as size-capped regular files; each distinct .mtl is read once. A reference that
+//! breaks these rules is treated like a missing file.
 
 use super::{decode_texture, fan};
+use crate::fsutil::resolve_inside;
+use crate::limits::{Limits, Which};
 use crate::mesh::{Appearance, Material, Texture};
 use crate::{GeomError, Mesh};
 use std::cell::RefCell;
-use std::collections::HashMap;
-use std::io::BufReader;
+use std::collections::{HashMap, HashSet};
+use std::io::{BufReader, Cursor, Read};
 use std::path::{Path, PathBuf};
 
 /// Diffuse colour of faces that use no material while other faces do: Blender's default
@@ -20,18 +28,27 @@ use std::path::{Path, PathBuf};
 const DEFAULT_DIFFUSE: [f32; 3] = [0.8, 0.8, 0.8];
 
 /// Loads an OBJ file (see the module documentation). The caller validates the result.
-pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
-    let file = std::fs::File::open(path).map_err(|e| GeomError::io(path, e))?;
-    let obj_dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+pub(super) fn load(path: &Path, limits: &Limits) -> Result<Mesh, GeomError> {
+    let (file, len) = crate::fsutil::open_limited(path, limits.max_file_bytes, Some(Which::FileBytes))?;
     let mtl_dir: RefCell<Option<PathBuf>> = RefCell::new(None);
+    // Canonical paths of the .mtl files read so far: each is read once.
+    let mtl_seen: RefCell<HashSet<PathBuf>> = RefCell::new(HashSet::new());
     let options =
         tobj::LoadOptions { triangulate: true, single_index: false, ignore_points: true, ignore_lines: true };
-    let (models, materials) = tobj::load_obj_buf(&mut BufReader::new(file), &options, |mtl: &Path| {
-        let full = obj_dir.join(mtl);
+    let mut reader = BufReader::new(file.take(len));
+    let (models, materials) = tobj::load_obj_buf(&mut reader, &options, |mtl: &Path| {
+        let unreadable = Err(tobj::LoadError::OpenFileFailed);
+        let Some(name) = mtl.to_str() else { return unreadable };
+        // A file name, not a URI: '%' is taken literally.
+        let Ok(full) = resolve_inside(path, &name.replace('%', "%25")) else { return unreadable };
+        if !mtl_seen.borrow_mut().insert(full.clone()) {
+            return Ok((Vec::new(), Default::default()));
+        }
+        let Ok(bytes) = super::read_referenced(&full, limits) else { return unreadable };
         if mtl_dir.borrow().is_none() {
             *mtl_dir.borrow_mut() = full.parent().map(Path::to_path_buf);
         }
-        tobj::load_mtl(&full)
+        tobj::load_mtl_buf(&mut Cursor::new(bytes))
     })
     .map_err(|e| GeomError::parse(path, format!("invalid OBJ: {e}")))?;
     // A missing or malformed .mtl only means "no colour".
@@ -79,7 +96,7 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
         }
     }
 
-    let appearance = appearance(&materials, mtl_dir.into_inner(), path, &tri_material, &tri_uvs);
+    let appearance = appearance(&materials, mtl_dir.into_inner(), path, &tri_material, &tri_uvs, limits)?;
     Ok(Mesh { positions, triangles, appearance })
 }
 
@@ -96,39 +113,73 @@ fn corner_uvs(m: &tobj::Mesh, first: usize) -> Option<[[f32; 2]; 3]> {
     Some(out)
 }
 
-/// Builds the appearance from the per-triangle material ids and UVs.
+/// Builds the appearance from the per-triangle material ids and UVs; errors only when the
+/// decoded textures would exceed [`Limits::max_texture_bytes`].
 fn appearance(
     materials: &[tobj::Material],
     mtl_dir: Option<PathBuf>,
     obj_path: &Path,
     tri_material: &[Option<usize>],
     tri_uvs: &[Option<[[f32; 2]; 3]>],
-) -> Appearance {
+    limits: &Limits,
+) -> Result<Appearance, GeomError> {
     let diffuse = |id: Option<usize>| -> Option<[f32; 3]> {
         let d = materials.get(id?)?.diffuse?;
         Some([d[0] as f32, d[1] as f32, d[2] as f32])
     };
     // Decode each distinct texture file once.
-    let obj_dir = obj_path.parent().map(Path::to_path_buf).unwrap_or_default();
     let mut textures: Vec<Texture> = Vec::new();
-    let mut by_file: HashMap<String, Option<usize>> = HashMap::new();
+    let mut texture_bytes = 0u64;
+    let mut by_name: HashMap<String, Option<usize>> = HashMap::new();
+    let mut by_file: HashMap<PathBuf, Option<usize>> = HashMap::new();
     let mut mat_texture: Vec<Option<usize>> = vec![None; materials.len()];
+    // Only materials that some triangle with UVs uses need their texture.
+    let mut needs_texture = vec![false; materials.len()];
+    for (m, uv) in tri_material.iter().zip(tri_uvs) {
+        if let (Some(m), Some(_)) = (m, uv) {
+            if let Some(n) = needs_texture.get_mut(*m) {
+                *n = true;
+            }
+        }
+    }
     for (i, mat) in materials.iter().enumerate() {
-        let Some(name) = mat.diffuse_texture.as_deref() else {
+        let Some(name) = mat.diffuse_texture.as_deref().filter(|_| needs_texture[i]) else {
             continue;
         };
         let name = name.trim().replace('\\', "/");
         if name.is_empty() {
             continue;
         }
-        let entry = by_file.entry(name.clone()).or_insert_with(|| {
-            let tex = texture_candidates(&name, mtl_dir.as_deref(), &obj_dir)
-                .into_iter()
-                .find_map(|p| std::fs::read(p).ok().and_then(|b| decode_texture(&b)))?;
-            textures.push(tex);
-            Some(textures.len() - 1)
-        });
-        mat_texture[i] = *entry;
+        if let Some(&t) = by_name.get(&name) {
+            mat_texture[i] = t;
+            continue;
+        }
+        // The first candidate that resolves inside its folder, reads and decodes; each file
+        // is decoded once.
+        let mut tex = None;
+        for file in texture_candidates(&name, mtl_dir.as_deref(), obj_path) {
+            let t = match by_file.get(&file) {
+                Some(&t) => t,
+                None => {
+                    let decoded = match super::read_referenced(&file, limits) {
+                        Ok(bytes) => decode_texture(obj_path, &bytes, &mut texture_bytes, limits)?,
+                        Err(_) => None,
+                    };
+                    let t = decoded.map(|t| {
+                        textures.push(t);
+                        textures.len() - 1
+                    });
+                    by_file.insert(file, t);
+                    t
+                }
+            };
+            if t.is_some() {
+                tex = t;
+                break;
+            }
+        }
+        by_name.insert(name, tex);
+        mat_texture[i] = tex;
     }
 
     let any_used_texture = tri_material
@@ -158,49 +209,53 @@ fn appearance(
             face_material.push(id);
             corner.push(uv.unwrap_or([[0.0; 2]; 3]));
         }
-        return Appearance::Textured {
+        return Ok(Appearance::Textured {
             corner_uvs: corner,
             face_material,
             materials: out_materials,
             textures,
-        };
+        });
     }
     if tri_material.iter().any(|&m| diffuse(m).is_some()) {
-        return Appearance::FaceColors(
+        return Ok(Appearance::FaceColors(
             tri_material.iter().map(|&m| diffuse(m).unwrap_or(DEFAULT_DIFFUSE)).collect(),
-        );
+        ));
     }
-    Appearance::None
+    Ok(Appearance::None)
 }
 
-/// Where a `map_Kd` file may be: relative to the .mtl, relative to the .obj, or (when the
-/// statement carries options such as `-bm 1 tex.png`) its last token.
-fn texture_candidates(name: &str, mtl_dir: Option<&Path>, obj_dir: &Path) -> Vec<PathBuf> {
+/// Where a `map_Kd` file may be: relative to the .mtl (inside the .mtl's folder), relative
+/// to the .obj (inside its folder), or (when the statement carries options such as
+/// `-bm 1 tex.png`) its last token; canonical paths of existing files only (see
+/// [`resolve_inside`]).
+fn texture_candidates(name: &str, mtl_dir: Option<&Path>, obj_path: &Path) -> Vec<PathBuf> {
     let mut names = vec![name.to_string()];
     if let Some(last) = name.split_whitespace().last() {
         if last != name {
             names.push(last.to_string());
         }
     }
+    // resolve_inside looks in the folder of its first argument: a stand-in file name there.
+    let mtl_anchor = mtl_dir.map(|d| d.join("_.mtl"));
     let mut out = Vec::new();
     for n in &names {
-        let p = Path::new(n);
-        if p.is_absolute() {
-            out.push(p.to_path_buf());
-            continue;
+        // A texture name is a path, not a URI: escape '%' so that it is taken literally.
+        let reference = n.replace('%', "%25");
+        for anchor in mtl_anchor.as_deref().into_iter().chain([obj_path]) {
+            if let Ok(p) = resolve_inside(anchor, &reference) {
+                out.push(p);
+            }
         }
-        if let Some(d) = mtl_dir {
-            out.push(d.join(p));
-        }
-        out.push(obj_dir.join(p));
     }
     out
 }
 
 #[cfg(test)]
 mod tests {
-    use crate::io::load_mesh;
+    use crate::io::{load_mesh, load_mesh_with};
+    use crate::limits::Limits;
     use crate::mesh::Appearance;
+    use crate::test_support::within;
     use std::path::PathBuf;
 
     fn write(dir: &tempfile::TempDir, name: &str, bytes: &[u8]) -> PathBuf {
@@ -290,5 +345,70 @@ mod tests {
         // No faces, only a line element.
         let e = err(&dir, b"v 0 0 0\nv 1 0 0\nl 1 2\n");
         assert!(e.contains("no triangles"), "{e}");
+    }
+
+    #[test]
+    fn mtllib_and_map_kd_are_read_only_inside_the_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        for sub in ["asset/mats", "outside"] {
+            std::fs::create_dir_all(d.join(sub)).unwrap();
+        }
+        std::fs::write(d.join("outside/evil.mtl"), b"newmtl m\nKd 1 0 0\n").unwrap();
+        std::fs::write(d.join("asset/good.mtl"), b"newmtl m\nKd 0 1 0\n").unwrap();
+        let geometry = "usemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+        let load = |mtllib: &str| {
+            let p = d.join("asset/m.obj");
+            std::fs::write(&p, format!("mtllib {mtllib}\n{geometry}")).unwrap();
+            within(10, move || load_mesh(&p).map(|m| m.appearance))
+        };
+        let green = Appearance::FaceColors(vec![[0.0, 1.0, 0.0]]);
+        assert_eq!(load("good.mtl").unwrap(), green);
+        let outside = d.join("outside/evil.mtl").display().to_string();
+        for bad in ["../outside/evil.mtl", outside.as_str(), "mats/../../outside/evil.mtl"] {
+            assert_eq!(load(bad).unwrap(), Appearance::None, "mtllib {bad}");
+        }
+        #[cfg(unix)]
+        {
+            use crate::test_support::{mkfifo, symlink};
+            symlink(&d.join("outside/evil.mtl"), &d.join("asset/link.mtl"));
+            assert_eq!(load("link.mtl").unwrap(), Appearance::None);
+            symlink(&d.join("asset/good.mtl"), &d.join("asset/mats/alias.mtl"));
+            assert_eq!(load("mats/alias.mtl").unwrap(), green);
+            mkfifo(&d.join("asset/fifo.mtl"));
+            assert_eq!(load("fifo.mtl").unwrap(), Appearance::None);
+        }
+
+        // Textures: map_Kd outside the folder (relative, absolute) is not read; Kd stays.
+        let img = image::RgbImage::from_raw(1, 1, vec![0, 0, 255]).unwrap();
+        img.save(d.join("outside/tex.png")).unwrap();
+        img.save(d.join("asset/tex.png")).unwrap();
+        let textured = |map: &str| {
+            std::fs::write(d.join("asset/t.mtl"), format!("newmtl m\nKd 1 1 1\nmap_Kd {map}\n")).unwrap();
+            let p = d.join("asset/t.obj");
+            std::fs::write(
+                &p,
+                format!("mtllib t.mtl\nvt 0 0\n{}", geometry.replace("f 1 2 3", "f 1/1 2/1 3/1")),
+            )
+            .unwrap();
+            within(10, move || load_mesh(&p).map(|m| matches!(m.appearance, Appearance::Textured { .. })))
+        };
+        assert!(textured("tex.png").unwrap());
+        let outside = d.join("outside/tex.png").display().to_string();
+        for bad in ["../outside/tex.png", outside.as_str(), &format!("-bm 1 {outside}")] {
+            assert!(!textured(bad).unwrap(), "map_Kd {bad}");
+        }
+        #[cfg(unix)]
+        {
+            crate::test_support::mkfifo(&d.join("asset/fifo.png"));
+            assert!(!textured("fifo.png").unwrap());
+        }
+        // A decoded-texture budget below the 1x1 texture's 3 bytes is an error.
+        let p = d.join("asset/t.obj");
+        std::fs::write(d.join("asset/t.mtl"), b"newmtl m\nKd 1 1 1\nmap_Kd tex.png\n").unwrap();
+        let e = load_mesh_with(&p, &Limits { max_texture_bytes: 2, ..Limits::default() })
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("t.obj") && e.contains("OBJVIEW_MAX_TEXTURE_BYTES"), "{e}");
     }
 }

@@ -8,6 +8,7 @@
 //! or reals 0..1; vertex colours (COFF) win over face colours.
 
 use super::fan;
+use crate::limits::{over, Limits, Which};
 use crate::mesh::Appearance;
 use crate::{GeomError, Mesh};
 use std::path::Path;
@@ -38,8 +39,8 @@ fn scale_colors(c: &mut [[f32; 3]], real: bool) {
 }
 
 /// Loads an OFF mesh. The caller validates the result.
-pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
-    let bytes = super::read_bytes(path)?;
+pub(super) fn load(path: &Path, limits: &Limits) -> Result<Mesh, GeomError> {
+    let bytes = super::read_input(path, limits)?;
     let text =
         std::str::from_utf8(&bytes).map_err(|_| GeomError::parse(path, "invalid OFF: not a text file"))?;
     // Non-empty lines with comments removed, with their 1-based line numbers.
@@ -94,6 +95,20 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
     if nv > u32::MAX as usize {
         return Err(GeomError::invalid(path, format!("{nv} vertices exceed 2^32")));
     }
+    if nv as u64 > limits.max_vertices {
+        return Err(GeomError::invalid(
+            path,
+            format!("header declares {nv} vertices, {}", over(Which::Vertices, limits.max_vertices)),
+        ));
+    }
+    // Every vertex and face takes a line of at least one byte: a header claiming more cannot
+    // be this file's (and must not make the loader count to 2^64).
+    if nv.saturating_add(nf) > bytes.len() {
+        return Err(GeomError::parse(
+            path,
+            format!("invalid OFF: header declares {nv} vertices and {nf} faces, more than a {}-byte file can hold", bytes.len()),
+        ));
+    }
 
     // Cap pre-allocation by what the file can hold (a garbage count must not exhaust memory).
     let mut positions = Vec::with_capacity(nv.min(bytes.len() / 6));
@@ -131,7 +146,7 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
         };
         let t: Vec<&str> = s.split_whitespace().collect();
         let n: usize = num(path, t[0], l)?;
-        if t.len() < 1 + n {
+        if t.len() - 1 < n {
             return Err(GeomError::parse(
                 path,
                 format!("invalid OFF: face on line {l} declares {n} corners but lists fewer"),
@@ -151,6 +166,10 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
         let extra = &t[1 + n..];
         let before = triangles.len();
         fan(&poly, &mut triangles);
+        if triangles.len() as u64 > limits.max_triangles {
+            let o = over(Which::Triangles, limits.max_triangles);
+            return Err(GeomError::invalid(path, format!("too many triangles, {o}")));
+        }
         if extra.len() >= 3 {
             let c = color(path, extra, l, &mut freal)?;
             fcolors.extend(std::iter::repeat_n(c, triangles.len() - before));
@@ -231,5 +250,43 @@ mod tests {
         check("OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n", "no triangles");
         check("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n4 0 1 2\n", "lists fewer");
         check("OFF\n3 1 0\n0 0 0\n1 x 0\n0 1 0\n3 0 1 2\n", "bad number 'x' on line 4");
+    }
+
+    #[test]
+    fn huge_counts_are_errors_without_a_panic() {
+        let dir = tempfile::tempdir().unwrap();
+        let check = |text: &str, want: &str| {
+            let e = load_mesh(&write(&dir, "huge.off", text)).unwrap_err().to_string();
+            assert!(e.contains("huge.off") && e.contains(want), "{e}");
+            assert!(!e.contains("parser failed"), "a caught panic: {e}");
+        };
+        // A face whose corner count is 2^64 - 1 (1 + n overflowed).
+        check(
+            "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n18446744073709551615 0 1 2\n",
+            "declares 18446744073709551615 corners",
+        );
+        // Counts far beyond what the file can hold fail at the header.
+        check("OFF\n3 18446744073709551615 0\n0 0 0\n1 0 0\n0 1 0\n", "more than a 47-byte file can hold");
+        check("OFF\n100000 1 0\n0 0 0\n", "declares 100000 vertices and 1 faces, more than a 21-byte");
+    }
+
+    #[test]
+    fn vertex_and_triangle_limits_apply() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = write(&dir, "q.off", "OFF\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 1\n4 0 1 2 3\n");
+        let d = crate::Limits::default();
+        let at = |l: crate::Limits| crate::io::load_mesh_with(&p, &l).unwrap_err().to_string();
+        assert!(
+            at(crate::Limits { max_vertices: 3, ..d }).contains("declares 4 vertices, over the limit of 3")
+        );
+        let e = at(crate::Limits { max_triangles: 1, ..d });
+        assert!(e.contains("q.off") && e.contains("OBJVIEW_MAX_TRIANGLES"), "{e}");
+        assert_eq!(
+            crate::io::load_mesh_with(&p, &crate::Limits { max_vertices: 4, max_triangles: 2, ..d })
+                .unwrap()
+                .triangles
+                .len(),
+            2
+        );
     }
 }

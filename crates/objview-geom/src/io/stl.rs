@@ -3,14 +3,20 @@
 //! STL stores independent triangles; `stl_io` merges bit-identical corners into shared
 //! vertices. STL has no colour. A binary file shorter than its declared triangle count is
 //! an error (a truncated download), not a silently smaller mesh.
+//!
+//! ASCII files are recognised by a first line starting with `solid` (after any leading
+//! whitespace), also a bare `solid` without a name and with CRLF line ends; `stl_io` insists on
+//! `solid ` with a space at the very start, so the first line is normalised to that before the
+//! bytes are handed over.
 
+use crate::limits::{over, Limits, Which};
 use crate::{GeomError, Mesh};
 use std::io::Cursor;
 use std::path::Path;
 
 /// Loads an STL mesh. The caller validates the result.
-pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
-    let bytes = super::read_bytes(path)?;
+pub(super) fn load(path: &Path, limits: &Limits) -> Result<Mesh, GeomError> {
+    let bytes = super::read_input(path, limits)?;
     let is_ascii = bytes.trim_ascii_start().starts_with(b"solid") && !looks_binary(&bytes);
     if !is_ascii {
         if bytes.len() < 84 {
@@ -20,6 +26,10 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
             ));
         }
         let n = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as u64;
+        if n > limits.max_triangles {
+            let o = over(Which::Triangles, limits.max_triangles);
+            return Err(GeomError::invalid(path, format!("binary header declares {n} triangles, {o}")));
+        }
         let need = 84 + 50 * n;
         if (bytes.len() as u64) < need {
             return Err(GeomError::parse(
@@ -32,7 +42,7 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
             ));
         }
     }
-    let mut bytes = bytes;
+    let mut bytes = if is_ascii { normalize_ascii(bytes) } else { bytes };
     if !is_ascii && bytes.starts_with(b"solid") {
         // stl_io decides "ascii" from a leading "solid "; the binary header is free text, so
         // blank it to make stl_io read the binary body.
@@ -50,6 +60,16 @@ pub(super) fn load(path: &Path) -> Result<Mesh, GeomError> {
         triangles.push([a, b, c]);
     }
     Ok(Mesh::new(positions, triangles))
+}
+
+/// An ascii STL with its first line (`solid`, `solid name`, possibly indented or ending in
+/// CRLF) replaced by the `solid \n` that `stl_io` requires; the rest is unchanged (`stl_io`
+/// splits lines on LF and CRLF and tokens on any whitespace).
+fn normalize_ascii(mut bytes: Vec<u8>) -> Vec<u8> {
+    let lead = bytes.len() - bytes.trim_ascii_start().len();
+    let body = bytes[lead..].iter().position(|&b| b == b'\n').map_or(bytes.len(), |i| lead + i + 1);
+    bytes.splice(..body, *b"solid \n");
+    bytes
 }
 
 /// A binary STL whose 80-byte header happens to start with "solid": its size matches the
@@ -134,5 +154,39 @@ mod tests {
         check(&binary(b"x", &[]), "no triangles");
         // STL has no indices, so "out of range" cannot occur; a degenerate file can:
         check(&binary(b"x", &[[[1.0; 3]; 3]]), "zero extent");
+    }
+
+    #[test]
+    fn ascii_with_bare_solid_indentation_or_crlf_loads() {
+        let dir = tempfile::tempdir().unwrap();
+        let body = "facet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\n\
+            endfacet\nfacet normal 0 0 1\nouter loop\nvertex 1 0 0\nvertex 1 1 0.5\nvertex 0 1 0\n\
+            endloop\nendfacet\nendsolid\n";
+        let crlf = |s: &str| s.replace('\n', "\r\n");
+        for (name, text) in [
+            ("bare", format!("solid\n{body}")),
+            ("bare-crlf", crlf(&format!("solid\n{body}"))),
+            ("named-crlf", crlf(&format!("solid part\n{body}"))),
+            ("indented", format!("  \tsolid part\n{body}")),
+            ("blank-line-first", format!("\n\nsolid\n{body}")),
+            (
+                "indented-body",
+                format!("solid x\n{}", body.lines().map(|l| format!("   {l}\n")).collect::<String>()),
+            ),
+        ] {
+            let p = write(&dir, &format!("{name}.stl"), text.as_bytes());
+            let m = load_mesh(&p).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(m.triangles.len(), 2, "{name}");
+            assert_eq!(m.triangle(1), [[1.0, 0.0, 0.0], [1.0, 1.0, 0.5], [0.0, 1.0, 0.0]], "{name}");
+        }
+    }
+
+    #[test]
+    fn binary_triangle_count_is_checked_against_the_limit() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = write(&dir, "b.stl", &binary(b"x", &TWO));
+        let l = crate::Limits { max_triangles: 1, ..Default::default() };
+        let e = crate::io::load_mesh_with(&p, &l).unwrap_err().to_string();
+        assert!(e.contains("b.stl") && e.contains("declares 2 triangles, over the limit of 1"), "{e}");
     }
 }

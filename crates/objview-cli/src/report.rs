@@ -58,6 +58,10 @@ fn report_with(
     print: bool,
 ) -> Result<Vec<PathBuf>> {
     let report = build_report(results, annotations, settings)?;
+    for s in &report.skipped {
+        let file = report.inputs.get(s.source.file).map(|f| f.path.display().to_string()).unwrap_or_default();
+        eprintln!("report: skipped {file}:{}: {}", s.source.line, s.reason);
+    }
     let files = report.write(out)?;
     if print {
         println!("{}", report.markdown());

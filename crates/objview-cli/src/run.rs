@@ -157,7 +157,10 @@ pub fn execute(a: &Args) -> Result<RunSummary> {
     settings.validate().map_err(anyhow::Error::msg)?;
     let candidates = Arc::new(cands.poses(settings.view_radius));
     let start_pose = match &a.start_pose {
-        Some(s) => Pose::parse(s).map_err(anyhow::Error::msg).context("--start-pose")?,
+        Some(s) => {
+            let p = Pose::parse(s).map_err(anyhow::Error::msg).context("--start-pose")?;
+            objview_episode::check_view_pose(&p.to_array()).context("--start-pose")?
+        }
         None => objview_views::start_pose(settings.view_radius),
     };
     anyhow::ensure!(
@@ -348,6 +351,12 @@ fn batch(
     failure: impl Fn(&ObjectRef, &anyhow::Error) -> String + Sync,
 ) -> Result<RunSummary> {
     let (out, existing) = ResumableJsonl::open(&a.out, "uid", a.retry_failed)?;
+    if existing.torn {
+        eprintln!(
+            "{}: cut off a torn last line (an interrupted write); that object is redone",
+            a.out.display()
+        );
+    }
     let todo = objects.iter().filter(|o| !existing.done.contains(&o.uid)).count();
     if !a.quiet {
         eprintln!(

@@ -46,6 +46,20 @@ pub struct Args {
     /// least recently used is dropped first.
     #[arg(long, default_value_t = objview_server::pool::DEFAULT_SCENE_CACHE)]
     pub scene_cache: usize,
+    /// Open connections at most (lowered to fit the descriptor limit). Beyond it a new
+    /// connection closes the one that has been idle (or half-sent) the longest; when every open
+    /// one is busy with a request, the new one gets 503 `overloaded`.
+    #[arg(long, default_value_t = objview_server::conn::DEFAULT_MAX_CONNECTIONS)]
+    pub max_connections: usize,
+    /// Seconds from the first byte of a request to the end of its head (else closed).
+    #[arg(long, default_value_t = objview_server::conn::DEFAULT_HEADER_TIMEOUT_S)]
+    pub header_timeout: f64,
+    /// Seconds for a request body to arrive (else 408 `request_timeout`, closed).
+    #[arg(long, default_value_t = objview_server::conn::DEFAULT_BODY_TIMEOUT_S)]
+    pub body_timeout: f64,
+    /// Seconds a connection with no request in progress stays open after its last activity.
+    #[arg(long, default_value_t = objview_server::conn::DEFAULT_IDLE_TIMEOUT_S)]
+    pub idle_timeout: f64,
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -63,6 +77,10 @@ pub fn run(a: Args) -> Result<()> {
         },
         normalize: a.normalize,
         scene_cache: a.scene_cache,
+        max_connections: a.max_connections,
+        header_timeout_s: a.header_timeout,
+        body_timeout_s: a.body_timeout,
+        idle_timeout_s: a.idle_timeout,
     };
     objview_server::run(&cfg, &a.addr, |addr, state| {
         let splits: Vec<String> = state
@@ -73,10 +91,16 @@ pub fn run(a: Args) -> Result<()> {
                 format!("{} ({} objects{})", s.id, s.objects.len(), if s.public { ", public" } else { "" })
             })
             .collect();
+        let l = &state.limits;
         println!(
-            "objview serve: listening on http://{addr} | splits: {} | db {}",
+            "objview serve: listening on http://{addr} | splits: {} | db {} | connections <= {} \
+             (header {} s, body {} s, idle {} s)",
             splits.join(", "),
-            a.db.display()
+            a.db.display(),
+            l.conn.max_connections,
+            l.conn.header_timeout.as_secs_f64(),
+            l.body_timeout.as_secs_f64(),
+            l.conn.idle_timeout.as_secs_f64()
         );
         let _ = std::io::stdout().flush();
     })?;

@@ -108,8 +108,20 @@ fn run_writes_contract_fields_resumes_and_is_deterministic() {
     let full = std::fs::read_to_string(&out).unwrap();
     let first_len = full.find('\n').unwrap() + 1;
     std::fs::write(&out, &full[..first_len + 40]).unwrap();
-    objview_ok(&a);
+    let o = objview(&a);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "{}: cut off a torn last line (an interrupted write); that object is redone",
+            s(&out)
+        )),
+        "a torn line is dropped silently: {stderr}"
+    );
     assert_eq!(std::fs::read_to_string(&out).unwrap(), full);
+    // A complete file: nothing to say.
+    let o = objview(&a);
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("torn"));
     // A fresh rerun (cached reference) is byte-identical; so is one without the cache.
     let out2 = dir.path().join("tsp2.jsonl");
     let mut args2 = base(&out2);
@@ -257,4 +269,55 @@ fn report_reads_runs_and_writes_tables() {
     let a2: Vec<&str> = args2.iter().map(|x| x.as_str()).collect();
     objview_ok(&a2);
     assert_eq!(std::fs::read(rep.join("report.md")).unwrap(), std::fs::read(rep2.join("report.md")).unwrap());
+}
+
+#[test]
+fn start_poses_beyond_the_bound_are_refused_and_blind_ones_fail_their_objects() {
+    let dir = tempdir();
+    let objs = write_objects(dir.path());
+    let out = dir.path().join("start.jsonl");
+    let args = |pose: &str| -> Vec<String> {
+        [
+            "run",
+            "--planner",
+            "random",
+            "--budget",
+            "auto",
+            "--objects",
+            s(&objs[0]),
+            "--out",
+            s(&out),
+            "--no-cache",
+            "--cap",
+            "3",
+            "--quiet",
+            "--start-pose",
+            pose,
+        ]
+        .iter()
+        .map(|x| x.to_string())
+        .collect()
+    };
+    let run = |pose: &str| {
+        let a = args(pose);
+        objview(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    // Huge but finite: a clear error naming the flag and the bound; nothing is written.
+    let o = run("1e300,1e300,1e300,0,0,0,0");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(err.contains("--start-pose") && err.contains("camera centre is 1.732e300 object units"), "{err}");
+    assert!(err.contains("at most 100"), "{err}");
+    assert!(!out.exists());
+    let o = run("3,0,0,0,0,500,0");
+    assert!(String::from_utf8_lossy(&o.stderr).contains("look-at point is 500.000"));
+    // Feasible and within the bound, but looking away from the object: the object's line is a
+    // failure saying why, never a result with `"cd": null`.
+    let o = run("3,0,0,6,0,0,0");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(&out).unwrap();
+    assert!(!text.contains("null"), "{text}");
+    let v = lines(&out);
+    assert_eq!(v.len(), 1);
+    assert!(v[0]["error"].as_str().unwrap().contains("sees nothing of object cube"), "{}", v[0]);
 }

@@ -1,13 +1,17 @@
 //! End-to-end tests of `objview serve`, `objview export` and `objview run --server` with the
 //! real binary: a server killed with SIGKILL restarts on its database with its finished results
 //! intact and its running episodes ended as `interrupted` (views scored); the export feeds
-//! `objview report`; a remote run writes the file a local run writes.
+//! `objview report`; a remote run writes the file a local run writes; under a low descriptor
+//! limit, a client holding idle connections cannot starve the server, and a huge pose neither
+//! poisons the results nor the report.
 
 mod common;
 
-use std::io::{BufRead, BufReader};
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
 
 use common::{objview_err, objview_ok, s, tempdir};
 use objview_geom::synth::{self, Detail};
@@ -32,26 +36,36 @@ fn pool(dir: &Path) -> PathBuf {
 struct Server {
     child: Child,
     url: String,
+    /// The line it printed when it started listening.
+    line: String,
 }
 
 impl Server {
     fn start(split: &Path, db: &Path, cache: &Path) -> Server {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_objview"))
-            .args([
-                "serve",
-                "--pool",
-                s(split),
-                "--addr",
-                "127.0.0.1:0",
-                "--db",
-                s(db),
-                "--cache-dir",
-                s(cache),
-            ])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("starting objview serve");
+        Server::spawn(Command::new(env!("CARGO_BIN_EXE_objview")).args(Server::args(split, db, cache)))
+    }
+
+    /// A server whose open-file limit (`ulimit -n`) is `nofile`, with `extra` arguments.
+    fn start_limited(split: &Path, db: &Path, cache: &Path, nofile: u32, extra: &[&str]) -> Server {
+        let mut cmd = Command::new("sh");
+        cmd.arg("-c")
+            .arg(format!("ulimit -n {nofile} && exec \"$0\" \"$@\""))
+            .arg(env!("CARGO_BIN_EXE_objview"))
+            .args(Server::args(split, db, cache))
+            .args(extra);
+        Server::spawn(&mut cmd)
+    }
+
+    fn args(split: &Path, db: &Path, cache: &Path) -> Vec<String> {
+        ["serve", "--pool", s(split), "--addr", "127.0.0.1:0", "--db", s(db), "--cache-dir", s(cache)]
+            .iter()
+            .map(|x| x.to_string())
+            .collect()
+    }
+
+    fn spawn(cmd: &mut Command) -> Server {
+        let mut child =
+            cmd.stdout(Stdio::piped()).stderr(Stdio::inherit()).spawn().expect("starting objview serve");
         let mut line = String::new();
         BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
         let url = line
@@ -59,7 +73,7 @@ impl Server {
             .find(|w| w.starts_with("http://"))
             .unwrap_or_else(|| panic!("no URL in {line:?}"))
             .to_string();
-        Server { child, url }
+        Server { child, url, line }
     }
 
     fn kill(&mut self) {
@@ -247,4 +261,73 @@ fn bench_serve_runs_concurrent_clients_against_an_in_process_server() {
     assert_eq!(r["client"]["samples"], 12);
     assert_eq!(r["server"]["samples"], 12, "every action answer carries Server-Timing");
     assert!(r["steps_per_second"].as_f64().unwrap() > 0.0);
+}
+
+/// `GET /v1/health` on a fresh connection: whether a 200 came, and how long it took.
+fn health(addr: &str) -> (bool, Duration) {
+    let t = Instant::now();
+    let Ok(mut c) = TcpStream::connect(addr) else { return (false, t.elapsed()) };
+    c.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    let _ = c.write_all(b"GET /v1/health HTTP/1.1\r\nHost: objview\r\nConnection: close\r\n\r\n");
+    let mut answer = String::new();
+    let _ = c.read_to_string(&mut answer);
+    (answer.starts_with("HTTP/1.1 200") && answer.contains("\"ok\""), t.elapsed())
+}
+
+#[test]
+fn under_a_low_descriptor_limit_idle_connections_neither_starve_the_server_nor_huge_poses_the_report() {
+    let dir = tempdir();
+    let split = pool(dir.path());
+    let (db, cache) = (dir.path().join("server.sqlite"), dir.path().join("cache"));
+    // The cap asked for (256) does not fit in 128 descriptors: it is lowered to 128 - 64.
+    let server = Server::start_limited(&split, &db, &cache, 128, &["--max-connections", "256"]);
+    assert!(server.line.contains("connections <= 64 (header 10 s, body 30 s, idle 60 s)"), "{}", server.line);
+    let addr = server.url.trim_start_matches("http://").to_string();
+    // 200 idle sockets, more than the descriptor limit: health checks still answer at once.
+    let idle: Vec<TcpStream> = (0..200).map(|_| TcpStream::connect(&addr).expect("connect")).collect();
+    for _ in 0..5 {
+        let (ok, took) = health(&addr);
+        assert!(ok && took < Duration::from_secs(3), "health check: {ok} after {took:?}");
+    }
+    drop(idle);
+    // A huge pose ends the episode as an invalid action; the result has no null.
+    let c = Client::new(&server.url, None);
+    let body = json!({"split": "hidden", "object": "cube", "view_space": "whole", "budget": "auto",
+                      "method": "test-nbv", "record_timings": false});
+    let id = c.create(&body).unwrap()["episode_id"].as_str().unwrap().to_string();
+    act(&c, &id, 0, json!({"type": "move", "pose": pose([1.0, 0.0, 0.5])}));
+    let end = act(&c, &id, 1, json!({"type": "move", "pose": [1e300, 1e300, 1e300, 0, 0, 0, 0]}));
+    assert_eq!(end["observation"]["terminal"]["reason"], "invalid_action");
+    let line = c.result(&id).unwrap();
+    assert!(!line.contains("null"), "{line}");
+    // Export, plus a line that an older server wrote for such a pose: the report skips and lists
+    // that line and reports the rest.
+    let out = dir.path().join("results.jsonl");
+    objview_ok(&["export", "--db", s(&db), "--out", s(&out)]);
+    let mut poisoned: Value = serde_json::from_str(&line).unwrap();
+    poisoned["uid"] = json!("octahedron");
+    poisoned["steps"][1]["path_cost"] = Value::Null;
+    let mut text = std::fs::read_to_string(&out).unwrap();
+    text.push_str(&format!("{poisoned}\n"));
+    std::fs::write(&out, text).unwrap();
+    let report = dir.path().join("report");
+    let o = common::objview(&["report", s(&out), "--out", s(&report), "--no-plots"]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "report: skipped {}:2: not an episode result (invalid type: null, expected f64",
+            s(&out)
+        )),
+        "{stderr}"
+    );
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("## Skipped lines"), "{stdout}");
+    let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+    assert!(md.contains("Episodes: 1 kept of 1 result line"), "{md}");
+    let failures = std::fs::read_to_string(report.join("failures.csv")).unwrap();
+    assert!(
+        failures.lines().any(|l| l.starts_with("skipped_line,") && l.contains(",2,octahedron,test-nbv,")),
+        "{failures}"
+    );
 }

@@ -26,6 +26,7 @@ use crate::reference::Reference;
 use crate::result::{tau_key, Checkpoint, EpisodeResult, Metrics, Step, TerminalSource};
 use crate::settings::EpisodeSettings;
 use crate::stabilization::Stabilization;
+use crate::validate::{check_pose, check_view_pose};
 use crate::EpisodeError;
 
 /// The hidden object of an episode, prepared once per (object, view space).
@@ -134,7 +135,9 @@ pub struct Episode {
 }
 
 impl Episode {
-    /// Starts an episode: takes the start view at `start_pose` and scores it.
+    /// Starts an episode: takes the start view at `start_pose` and scores it. Errors: bad
+    /// settings, a start pose that [`check_view_pose`] refuses, a start view that sees nothing
+    /// of the object (its CD would be infinite).
     pub fn start(
         scene: Arc<Scene>,
         settings: EpisodeSettings,
@@ -145,6 +148,8 @@ impl Episode {
     ) -> Result<Episode, EpisodeError> {
         let started = Instant::now();
         settings.validate().map_err(EpisodeError::Settings)?;
+        check_view_pose(&start_pose.to_array())
+            .map_err(|e| EpisodeError::Settings(format!("start pose {:?}: {e}", start_pose.to_array())))?;
         let max_tau = settings.taus.iter().cloned().fold(0.0, f64::max);
         let (gt, reference) = scene.fresh_targets(max_tau)?;
         let h = settings.fusion_voxel;
@@ -184,6 +189,15 @@ impl Episode {
             start_pose,
         };
         ep.observe(start_pose, 0.0);
+        if ep.fused.is_empty() {
+            // CD (and every later step's, until something is seen) would be infinite.
+            return Err(EpisodeError::Setup(format!(
+                "the start view from {:?} sees nothing of object {}: its metrics are undefined \
+                 (choose a start pose that looks at the object)",
+                start_pose.to_array(),
+                ep.scene.uid
+            )));
+        }
         Ok(ep)
     }
 
@@ -284,14 +298,13 @@ impl Episode {
                 ),
             },
             Action::Move { pose } => {
-                let Some(p) = Pose::from_array(*pose) else {
-                    self.end(TerminalSource::Benchmark, "invalid_action", format!("pose {pose:?} is not 7 finite numbers"));
-                    return;
+                let p = match check_view_pose(pose) {
+                    Ok(p) => p,
+                    Err(e) => {
+                        self.end(TerminalSource::Benchmark, "invalid_action", format!("pose {pose:?}: {e}"));
+                        return;
+                    }
                 };
-                if p.center == p.look_at {
-                    self.end(TerminalSource::Benchmark, "invalid_action", "pose centre equals its look-at point");
-                    return;
-                }
                 if let (ExecutionMode::BudgetedPlan | ExecutionMode::SetCoverPlan, Budget::Fixed(k)) =
                     (self.method.mode, self.budget)
                 {
@@ -497,7 +510,8 @@ struct PlannerView<'a> {
 
 impl Environment for PlannerView<'_> {
     fn is_feasible(&self, pose: &Pose) -> bool {
-        self.space.is_feasible(pose)
+        // A pose the environment would refuse as a move is not feasible either.
+        check_pose(&pose.to_array()).is_ok() && self.space.is_feasible(pose)
     }
     fn history(&self) -> &[Pose] {
         self.history
@@ -509,7 +523,8 @@ impl Environment for PlannerView<'_> {
 
 /// Runs `planner` on `scene` to the end of the episode and returns its result. Planner time
 /// (reset + every act) is PR; a planner error or panic ends the episode with the `exception`
-/// source, scoring the views taken.
+/// source, scoring the views taken. A result with a non-finite number (it would be written as
+/// `null`) is an error ([`EpisodeError::NonFinite`]), never a result.
 #[allow(clippy::too_many_arguments)]
 pub fn run_episode(
     scene: Arc<Scene>,
@@ -574,7 +589,11 @@ pub fn run_episode(
             }
         }
     }
-    Ok(ep.finish(settings_record))
+    let result = ep.finish(settings_record);
+    match result.non_finite() {
+        Some(field) => Err(EpisodeError::NonFinite(field)),
+        None => Ok(result),
+    }
 }
 
 fn panic_text(p: &Box<dyn std::any::Any + Send>) -> String {

@@ -11,6 +11,7 @@
 //! - [`scripted`] — a planner that plays a fixed action list (replays, tests, benchmarks).
 //! - [`engine`] — the environment, checkpoints, budgets and terminal reasons.
 //! - [`result`] — the JSON Lines result format; [`settings`] — every SPEC §5 constant.
+//! - [`validate`] — the one check of a pose from outside (bounds, finite numbers).
 
 pub mod path;
 pub mod planner;
@@ -29,6 +30,7 @@ pub mod scene;
 pub mod scripted;
 pub mod settings;
 pub mod stabilization;
+pub mod validate;
 
 pub use engine::{run_episode, scene_domain, Episode, MethodInfo, Scene, Terminal};
 pub use reference::{observable_reference, Reference};
@@ -36,6 +38,7 @@ pub use result::{EpisodeResult, TerminalSource};
 pub use scene::{load_scene, scene_from_parts, SceneSource};
 pub use scripted::Scripted;
 pub use settings::EpisodeSettings;
+pub use validate::{check_pose, check_view_pose, PoseError, MAX_POSE_DISTANCE};
 
 /// Errors of episode set-up (a running episode never fails: it ends with a terminal reason).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -46,4 +49,8 @@ pub enum EpisodeError {
     Setup(String),
     #[error("{0}: {1}")]
     Io(String, String),
+    /// A number of the result is NaN or infinite (it would be written as `null`); the field's
+    /// path, e.g. `steps[0].cd`. The result is not written.
+    #[error("the result has a non-finite number at `{0}`; it is not written")]
+    NonFinite(String),
 }

@@ -59,8 +59,9 @@ impl fmt::Display for StopReason {
 }
 
 /// What a planner answers. It is kept *raw* (seven numbers, a reason string) because remote
-/// planners send exactly that: the environment validates it (finite numbers, centre ≠ look-at,
-/// a known reason, a feasible pose) and ends the episode with `invalid_action` otherwise.
+/// planners send exactly that: the environment validates it (finite numbers, centre and look-at
+/// within [`crate::MAX_POSE_DISTANCE`] of the origin, centre ≠ look-at, a known reason, a
+/// feasible pose; see [`crate::validate`]) and ends the episode with `invalid_action` otherwise.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum Action {
@@ -206,7 +207,8 @@ pub struct EpisodeContext {
 
 /// The environment as a planner sees it: feasibility queries and its own history.
 pub trait Environment {
-    /// Whether `pose` is feasible in the episode's view space.
+    /// Whether `pose` is feasible in the episode's view space (a pose beyond
+    /// [`crate::MAX_POSE_DISTANCE`] never is).
     fn is_feasible(&self, pose: &Pose) -> bool;
     /// [`Environment::is_feasible`] for each pose, in order.
     fn feasible_mask(&self, poses: &[Pose]) -> Vec<bool> {

@@ -126,7 +126,139 @@ pub struct EpisodeResult {
     pub wall_seconds: f64,
 }
 
+impl EpisodeResult {
+    /// The path of the first number that is NaN or infinite (`steps[0].cd`,
+    /// `checkpoints.terminal.path_cost`, …), or `None` when every number is finite. JSON has no
+    /// such numbers (they serialize as `null`), and a reader of results expects a number, so a
+    /// result with one must take the error path instead of being written.
+    pub fn non_finite(&self) -> Option<String> {
+        fn all(prefix: &str, xs: &[f64]) -> Option<String> {
+            xs.iter().position(|x| !x.is_finite()).map(|i| format!("{prefix}[{i}]"))
+        }
+        fn map(prefix: &str, m: &BTreeMap<String, f64>) -> Option<String> {
+            m.iter().find(|(_, x)| !x.is_finite()).map(|(k, _)| format!("{prefix}.{k}"))
+        }
+        fn metrics(prefix: &str, m: &Metrics) -> Option<String> {
+            map(&format!("{prefix}.sc"), &m.sc).or_else(|| map(&format!("{prefix}.nsc"), &m.nsc)).or_else(
+                || {
+                    [("cd", m.cd), ("path_cost", m.path_cost), ("runtime", m.runtime)]
+                        .into_iter()
+                        .find(|(_, x)| !x.is_finite())
+                        .map(|(k, _)| format!("{prefix}.{k}"))
+                },
+            )
+        }
+        if let Some(f) = all("start_pose", &self.start_pose) {
+            return Some(f);
+        }
+        for (i, p) in self.visited_poses.iter().enumerate() {
+            if let Some(f) = all(&format!("visited_poses[{i}]"), p) {
+                return Some(f);
+            }
+        }
+        for (i, s) in self.steps.iter().enumerate() {
+            let at = format!("steps[{i}]");
+            let found = all(&format!("{at}.pose"), &s.pose)
+                .or_else(|| metrics(&at, &s.metrics))
+                .or_else(|| all(&format!("{at}.stage_seconds"), &s.stage_seconds))
+                .or_else(|| {
+                    [("planner_seconds", s.planner_seconds), ("engine_seconds", s.engine_seconds)]
+                        .into_iter()
+                        .find(|(_, x)| !x.is_finite())
+                        .map(|(k, _)| format!("{at}.{k}"))
+                });
+            if found.is_some() {
+                return found;
+            }
+        }
+        for (name, c) in &self.checkpoints {
+            if let Some(f) = metrics(&format!("checkpoints.{name}"), &c.metrics) {
+                return Some(f);
+            }
+        }
+        if let Some(f) = map("reference.observable_sc", &self.reference.observable_sc) {
+            return Some(f);
+        }
+        (!self.wall_seconds.is_finite()).then(|| "wall_seconds".to_string())
+    }
+}
+
 /// A τ written as a key: two decimals (`0.02` → `"0.02"`).
 pub fn tau_key(tau: f64) -> String {
     format!("{tau:.2}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn metrics(cd: f64) -> Metrics {
+        let taus = BTreeMap::from([("0.02".to_string(), 0.5)]);
+        Metrics { views: 1, sc: taus.clone(), nsc: taus, cd, path_cost: 0.0, runtime: 0.0 }
+    }
+
+    fn result(cd: f64) -> EpisodeResult {
+        let step = Step {
+            step: 0,
+            pose: [3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            metrics: metrics(cd),
+            fused_points: 1,
+            ms_voxels: BTreeMap::new(),
+            planner_seconds: 0.0,
+            engine_seconds: 0.0,
+            stage_seconds: [0.0; 4],
+        };
+        EpisodeResult {
+            settings: serde_json::json!({}),
+            uid: "o".into(),
+            method: "m".into(),
+            family: "classical".into(),
+            execution_mode: "iterative".into(),
+            view_space: "whole".into(),
+            budget: "auto".into(),
+            seed: 0,
+            start_pose: step.pose,
+            visited_poses: vec![step.pose],
+            terminal_source: TerminalSource::AlgorithmStop,
+            terminal_reason: "plan_end".into(),
+            terminal_detail: String::new(),
+            checkpoints: BTreeMap::from([(
+                "terminal".to_string(),
+                Checkpoint { step: 0, metrics: metrics(cd) },
+            )]),
+            steps: vec![step],
+            reference: ReferenceInfo {
+                points: 1,
+                views: 1,
+                view_set: "tammes-360".into(),
+                observable_sc: BTreeMap::new(),
+                key: String::new(),
+                cached: false,
+            },
+            gt_points: 1,
+            gt_source: "sampled".into(),
+            wall_seconds: 0.0,
+        }
+    }
+
+    #[test]
+    fn a_finite_result_has_no_non_finite_field() {
+        assert_eq!(result(0.1).non_finite(), None);
+    }
+
+    #[test]
+    fn the_first_non_finite_number_is_named_by_its_path() {
+        assert_eq!(result(f64::INFINITY).non_finite().as_deref(), Some("steps[0].cd"));
+        let mut r = result(0.1);
+        r.checkpoints.get_mut("terminal").unwrap().metrics.path_cost = f64::NAN;
+        assert_eq!(r.non_finite().as_deref(), Some("checkpoints.terminal.path_cost"));
+        r.visited_poses[0][6] = f64::NEG_INFINITY;
+        assert_eq!(r.non_finite().as_deref(), Some("visited_poses[0][6]"));
+        let mut r = result(0.1);
+        r.steps[0].metrics.nsc.insert("0.01".into(), f64::NAN);
+        assert_eq!(r.non_finite().as_deref(), Some("steps[0].nsc.0.01"));
+        // Written as JSON, such a number would be a null.
+        let line = serde_json::to_string(&result(f64::INFINITY)).unwrap();
+        assert!(line.contains("\"cd\":null"), "{line}");
+    }
 }

@@ -133,6 +133,10 @@ fn invalid_actions_end_the_episode_and_keep_views() {
         (Action::Move { pose: [f64::NAN, 0.0, 3.0, 0.0, 0.0, 0.0, 0.0] }, "not 7 finite numbers"),
         (Action::Move { pose: [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0] }, "centre equals its look-at"),
         (Action::Move { pose: [0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0] }, "infeasible"),
+        // Finite but huge: feasible in `whole` by its rules (the radius overflows to inf),
+        // refused by the pose bound before anything is rendered or scored.
+        (Action::Move { pose: [1e300, 1e300, 1e300, 0.0, 0.0, 0.0, 0.0] }, "camera centre is 1.732e300"),
+        (Action::Move { pose: [3.0, 0.0, 0.0, 0.0, 0.0, 100.5, 0.0] }, "look-at point is 100.500"),
     ];
     for (bad, why) in cases {
         let mut actions = good.clone();
@@ -143,6 +147,9 @@ fn invalid_actions_end_the_episode_and_keep_views() {
         assert!(r.terminal_detail.contains(why), "{why}: {}", r.terminal_detail);
         assert_eq!(r.visited_poses.len(), 3, "views taken before are kept");
         assert_eq!(r.checkpoints["terminal"].metrics.views, 3);
+        assert_eq!(r.non_finite(), None, "{why}");
+        let line = serde_json::to_string(&r).unwrap();
+        assert!(!line.contains("null"), "{why}: {line}");
     }
     // Quarter: a pose with y < 0 is infeasible.
     let r = run(
@@ -273,4 +280,79 @@ fn same_inputs_give_identical_results() {
         .unwrap()
     };
     assert_eq!(once(), once());
+}
+
+/// Runs a planner that stops at once from `start` in `whole`.
+fn from_start(start: Pose) -> Result<EpisodeResult, objview_episode::EpisodeError> {
+    let mut p = Scripted::new(vec![Action::stop(StopReason::PlanEnd)], ExecutionMode::Iterative);
+    run_episode(
+        scene("whole"),
+        &mut p,
+        &settings(),
+        Budget::Auto,
+        0,
+        start,
+        tammes360(),
+        serde_json::json!({}),
+    )
+}
+
+#[test]
+fn start_poses_out_of_bounds_or_seeing_nothing_are_errors_not_results() {
+    let huge = Pose { center: [1e300, 1e300, 1e300], look_at: [0.0; 3], roll: 0.0 };
+    let e = from_start(huge).unwrap_err().to_string();
+    assert!(e.contains("start pose") && e.contains("camera centre is 1.732e300"), "{e}");
+    // Feasible in `whole` (radius 3) but looking away from the object: nothing is fused, so CD
+    // would be infinite (written as `"cd": null`).
+    let away = Pose { center: [3.0, 0.0, 0.0], look_at: [6.0, 0.0, 0.0], roll: 0.0 };
+    assert!(ViewSpace::builtin("whole").unwrap().is_feasible(&away));
+    let e = from_start(away).unwrap_err().to_string();
+    assert!(e.contains("sees nothing of object sphere"), "{e}");
+    // The default start pose sees it.
+    let r = from_start(start_pose(3.0)).unwrap();
+    assert_eq!(r.non_finite(), None);
+}
+
+#[test]
+fn poses_beyond_the_bound_are_infeasible_to_a_local_planner() {
+    struct Probe(Vec<bool>);
+    impl Planner for Probe {
+        fn name(&self) -> &str {
+            "probe"
+        }
+        fn family(&self) -> Family {
+            Family::Baseline
+        }
+        fn execution_mode(&self) -> ExecutionMode {
+            ExecutionMode::Iterative
+        }
+        fn params(&self) -> serde_json::Value {
+            serde_json::json!({})
+        }
+        fn reset(&mut self, _: &EpisodeContext, env: &dyn Environment) -> Result<(), PlannerError> {
+            let poses = [
+                Pose { center: [3.0, 0.0, 0.0], look_at: [0.0; 3], roll: 0.0 },
+                Pose { center: [1e300, 1e300, 1e300], look_at: [0.0; 3], roll: 0.0 },
+                Pose { center: [3.0, 0.0, 0.0], look_at: [0.0, 0.0, 1e3], roll: 0.0 },
+            ];
+            self.0 = env.feasible_mask(&poses);
+            Ok(())
+        }
+        fn act(&mut self, _: &Observation, _: &dyn Environment) -> Result<Action, PlannerError> {
+            Ok(Action::stop(StopReason::PlanEnd))
+        }
+    }
+    let mut p = Probe(Vec::new());
+    run_episode(
+        scene("whole"),
+        &mut p,
+        &settings(),
+        Budget::Auto,
+        0,
+        start_pose(3.0),
+        tammes360(),
+        serde_json::json!({}),
+    )
+    .unwrap();
+    assert_eq!(p.0, vec![true, false, false]);
 }

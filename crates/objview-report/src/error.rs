@@ -1,6 +1,7 @@
-//! Error type of `objview report`. Every variant names what it is about (the input file and
-//! line, the output file, the setting) and why, so that a failed report is diagnosable from one
-//! line of output.
+//! Error type of `objview report`. Every variant names what it is about (the input or output
+//! file, the setting) and why, so that a failed report is diagnosable from one line of output.
+//! A bad line of a results file is not an error: it is skipped and listed
+//! ([`crate::load::SkippedLine`]).
 
 use std::path::PathBuf;
 
@@ -14,10 +15,6 @@ pub enum ReportError {
     /// Reading an input or writing an output file failed.
     #[error("{path}: {source}")]
     Io { path: PathBuf, source: std::io::Error },
-    /// A line of a results file is not an episode result or a failure line, or contradicts an
-    /// earlier line (a method with two families, …). `line` counts from 1.
-    #[error("{path}:{line}: {reason}")]
-    BadLine { path: PathBuf, line: usize, reason: String },
     /// The annotation files could not be read (the inner error names the file and line).
     #[error("annotations: {0}")]
     Annotations(#[from] DatasetError),
@@ -36,10 +33,5 @@ impl ReportError {
     /// Shorthand for [`ReportError::Io`].
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         ReportError::Io { path: path.into(), source }
-    }
-
-    /// Shorthand for [`ReportError::BadLine`].
-    pub fn bad_line(path: impl Into<PathBuf>, line: usize, reason: impl Into<String>) -> Self {
-        ReportError::BadLine { path: path.into(), line, reason: reason.into() }
     }
 }

@@ -8,8 +8,12 @@
 //!   not run): kept, counted and listed, never fatal;
 //! - blank: skipped.
 //!
-//! Anything else is an error naming the file and line, except a torn last line (no trailing
-//! newline and not JSON: an interrupted run), which is skipped with a warning.
+//! Anything else — not JSON, not an object, not an episode result (a `null` where a number is
+//! expected, a missing field), a result that fails the checks, an `objview annotate` line, a
+//! method whose family or execution mode contradicts an earlier line — is a *skipped line*: left
+//! out, and listed with its file, line and reason ([`SkippedLine`]), so that one bad line (a
+//! hostile client's result, a hand edit) does not take the rest of the file with it. A torn last
+//! line (no trailing newline and not JSON: an interrupted run) is skipped with a warning.
 //!
 //! Duplicates: the same (uid, method, view space, budget, seed) seen twice keeps the last one.
 //! An iterative planner runs once and serves every budget setting (SPEC §5), so iterative runs of
@@ -40,6 +44,8 @@ pub struct InputFile {
     pub episodes: usize,
     /// Of those, failure lines.
     pub failures: usize,
+    /// Of those, skipped lines (see [`SkippedLine`]).
+    pub skipped: usize,
     /// Whether a torn last line (an interrupted write) was skipped.
     pub torn_last_line: bool,
 }
@@ -86,6 +92,38 @@ pub struct FailureLine {
     pub superseded: bool,
 }
 
+/// A line that is neither a usable episode result nor a failure line: left out of every table
+/// and listed. What it says of its episode (uid, method, …) is kept when it is a JSON object.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SkippedLine {
+    /// Where it was read.
+    pub source: Source,
+    pub uid: String,
+    pub method: String,
+    pub view_space: String,
+    pub budget: String,
+    /// The seed, when the line has one.
+    pub seed: Option<u64>,
+    /// Why it was skipped.
+    pub reason: String,
+}
+
+impl SkippedLine {
+    fn new(source: Source, value: Option<&Value>, reason: impl Into<String>) -> SkippedLine {
+        let f = value.filter(|v| v.is_object()).map(|v| failure_line(source, v));
+        let text = |g: fn(&FailureLine) -> &String| f.as_ref().map(|f| g(f).clone()).unwrap_or_default();
+        SkippedLine {
+            source,
+            uid: text(|f| &f.uid),
+            method: text(|f| &f.method),
+            view_space: text(|f| &f.view_space),
+            budget: text(|f| &f.budget),
+            seed: f.as_ref().and_then(|f| f.seed),
+            reason: reason.into(),
+        }
+    }
+}
+
 /// Why an episode was dropped in favour of another.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -122,6 +160,8 @@ pub struct Loaded {
     pub episodes: Vec<Episode>,
     /// Failure lines, in input order.
     pub failures: Vec<FailureLine>,
+    /// Skipped lines, in input order.
+    pub skipped: Vec<SkippedLine>,
     /// Dropped duplicates, in input order of the dropped line.
     pub duplicates: Vec<Duplicate>,
     /// τ keys present in the NSC and SC of every checkpoint and step of every kept episode.
@@ -147,10 +187,17 @@ pub fn load_results(paths: &[PathBuf], tau: &str) -> Result<Loaded, ReportError>
     let mut files = Vec::new();
     let mut raw = Vec::new();
     let mut failures = Vec::new();
+    let mut skipped = Vec::new();
     for (file, path) in paths.iter().enumerate() {
         let text = std::fs::read_to_string(path).map_err(|e| ReportError::io(path, e))?;
-        let mut info =
-            InputFile { path: path.clone(), lines: 0, episodes: 0, failures: 0, torn_last_line: false };
+        let mut info = InputFile {
+            path: path.clone(),
+            lines: 0,
+            episodes: 0,
+            failures: 0,
+            skipped: 0,
+            torn_last_line: false,
+        };
         let complete = text.ends_with('\n');
         let all: Vec<&str> = text.lines().collect();
         for (i, line) in all.iter().enumerate() {
@@ -164,33 +211,50 @@ pub fn load_results(paths: &[PathBuf], tau: &str) -> Result<Loaded, ReportError>
                     info.torn_last_line = true;
                     continue;
                 }
-                Err(e) => return Err(ReportError::bad_line(path, i + 1, format!("not JSON ({e})"))),
+                Err(e) => {
+                    info.lines += 1;
+                    info.skipped += 1;
+                    skipped.push(SkippedLine::new(source, None, format!("not JSON ({e})")));
+                    continue;
+                }
             };
             info.lines += 1;
-            if !value.is_object() {
-                return Err(ReportError::bad_line(path, i + 1, "not a JSON object"));
+            match read_line(value, source, tau) {
+                Ok(Line::Failure(f)) => {
+                    info.failures += 1;
+                    failures.push(f);
+                }
+                Ok(Line::Episode(e)) => {
+                    info.episodes += 1;
+                    raw.push(*e);
+                }
+                Err(s) => {
+                    info.skipped += 1;
+                    skipped.push(*s);
+                }
             }
-            if value.get("error").is_some() {
-                info.failures += 1;
-                failures.push(failure_line(source, &value));
-                continue;
-            }
-            if value.get("d_sat").is_some() && value.get("method").is_none() {
-                return Err(ReportError::bad_line(
-                    path,
-                    i + 1,
-                    "an `objview annotate` line, not an episode result (give annotation files as annotations)",
-                ));
-            }
-            let result: EpisodeResult = serde_json::from_value(value)
-                .map_err(|e| ReportError::bad_line(path, i + 1, format!("not an episode result ({e})")))?;
-            let episode = check(result, source, tau).map_err(|r| ReportError::bad_line(path, i + 1, r))?;
-            info.episodes += 1;
-            raw.push(episode);
         }
         files.push(info);
     }
-    check_methods(&files, &raw)?;
+    let mut contradicting = BTreeSet::new();
+    for (e, reason) in contradicting_methods(&files, &raw) {
+        contradicting.insert(e.source);
+        let file = &mut files[e.source.file];
+        file.episodes -= 1;
+        file.skipped += 1;
+        let r = &e.result;
+        skipped.push(SkippedLine {
+            source: e.source,
+            uid: r.uid.clone(),
+            method: r.method.clone(),
+            view_space: r.view_space.clone(),
+            budget: r.budget.clone(),
+            seed: Some(r.seed),
+            reason,
+        });
+    }
+    raw.retain(|e| !contradicting.contains(&e.source));
+    skipped.sort_by_key(|s| s.source);
     let (mut episodes, duplicates) = deduplicate(raw);
     episodes.sort_by(|a, b| sort_key(a).cmp(&sort_key(b)));
     let results: BTreeSet<(&str, &str, &str, &str, u64)> = episodes
@@ -212,7 +276,38 @@ pub fn load_results(paths: &[PathBuf], tau: &str) -> Result<Loaded, ReportError>
         });
     }
     let taus = common_taus(&episodes);
-    Ok(Loaded { files, episodes, failures, duplicates, taus })
+    Ok(Loaded { files, episodes, failures, skipped, duplicates, taus })
+}
+
+/// A JSON line read.
+enum Line {
+    Episode(Box<Episode>),
+    Failure(FailureLine),
+}
+
+/// A JSON line as a failure line or a checked episode result; the skipped line otherwise.
+fn read_line(value: Value, source: Source, tau: &str) -> Result<Line, Box<SkippedLine>> {
+    let skip = |v: &Value, reason: String| Box::new(SkippedLine::new(source, Some(v), reason));
+    if !value.is_object() {
+        return Err(skip(&value, "not a JSON object".into()));
+    }
+    if value.get("error").is_some() {
+        return Ok(Line::Failure(failure_line(source, &value)));
+    }
+    if value.get("d_sat").is_some() && value.get("method").is_none() {
+        return Err(skip(
+            &value,
+            "an `objview annotate` line, not an episode result (give annotation files as annotations)".into(),
+        ));
+    }
+    let result: EpisodeResult = match serde_json::from_value(value.clone()) {
+        Ok(r) => r,
+        Err(e) => return Err(skip(&value, format!("not an episode result ({e})"))),
+    };
+    match check(result, source, tau) {
+        Ok(e) => Ok(Line::Episode(Box::new(e))),
+        Err(reason) => Err(skip(&value, reason)),
+    }
 }
 
 fn sort_key(e: &Episode) -> (&str, &str, &str, u64, &str, Source) {
@@ -275,9 +370,11 @@ fn check(result: EpisodeResult, source: Source, tau: &str) -> Result<Episode, St
     Ok(Episode { source, mode, budget, result })
 }
 
-/// A method must have one family and one execution mode; the error names the later line.
-fn check_methods(files: &[InputFile], episodes: &[Episode]) -> Result<(), ReportError> {
+/// A method must have one family and one execution mode: the episodes that contradict the first
+/// line of their method, with the reason (naming that line).
+fn contradicting_methods<'a>(files: &[InputFile], episodes: &'a [Episode]) -> Vec<(&'a Episode, String)> {
     let mut first: BTreeMap<&str, &Episode> = BTreeMap::new();
+    let mut out = Vec::new();
     for e in episodes {
         let r = &e.result;
         let Some(f) = first.get(r.method.as_str()) else {
@@ -285,24 +382,19 @@ fn check_methods(files: &[InputFile], episodes: &[Episode]) -> Result<(), Report
             continue;
         };
         let bad = |field: &str, here: &str, there: &str| {
-            ReportError::bad_line(
-                &files[e.source.file].path,
-                e.source.line,
-                format!(
-                    "method '{}' has {field} '{here}' here but '{there}' at {}",
-                    r.method,
-                    locate(files, f.source)
-                ),
+            format!(
+                "method '{}' has {field} '{here}' here but '{there}' at {}",
+                r.method,
+                locate(files, f.source)
             )
         };
         if r.family != f.result.family {
-            return Err(bad("family", &r.family, &f.result.family));
-        }
-        if e.mode != f.mode {
-            return Err(bad("execution_mode", &r.execution_mode, &f.result.execution_mode));
+            out.push((e, bad("family", &r.family, &f.result.family)));
+        } else if e.mode != f.mode {
+            out.push((e, bad("execution_mode", &r.execution_mode, &f.result.execution_mode)));
         }
     }
-    Ok(())
+    out
 }
 
 fn terminal_views(e: &Episode) -> usize {

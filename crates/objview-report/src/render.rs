@@ -7,7 +7,7 @@ use crate::aggregate::{Aggregate, Stat};
 use crate::format::{
     csv, csv_decimals, csv_num, family_title, fixed, fixed_opt, markdown_table, plural, Align,
 };
-use crate::load::{FailureLine, InputFile, Source};
+use crate::load::{FailureLine, InputFile, SkippedLine, Source};
 use crate::tables::{MsTable, RankedTable, ReachTable, TerminalTable};
 
 use Align::{Left, Right};
@@ -564,18 +564,56 @@ pub fn failures_markdown(failures: &[FailureLine], files: &[InputFile], limit: u
     out
 }
 
-/// CSV of the failure lines.
-pub fn failures_csv(failures: &[FailureLine], files: &[InputFile]) -> String {
+/// The skipped lines in Markdown (the first `limit`).
+pub fn skipped_markdown(skipped: &[SkippedLine], files: &[InputFile], limit: usize) -> String {
+    let mut out = "## Skipped lines\n\n".to_string();
+    out.push_str("Lines left out of every table: not usable as an episode result or a failure line.\n\n");
+    let headers = [
+        ("Line", Left),
+        ("uid", Left),
+        ("Method", Left),
+        ("View space", Left),
+        ("Budget", Left),
+        ("Seed", Right),
+        ("Reason", Left),
+    ];
+    let rows: Vec<Vec<String>> = skipped
+        .iter()
+        .take(limit)
+        .map(|s| {
+            vec![
+                locate(files, s.source),
+                s.uid.clone(),
+                s.method.clone(),
+                s.view_space.clone(),
+                s.budget.clone(),
+                s.seed.map(|x| x.to_string()).unwrap_or_default(),
+                s.reason.clone(),
+            ]
+        })
+        .collect();
+    out.push_str(&markdown_table(&headers, &rows));
+    if skipped.len() > limit {
+        out.push_str(&format!("\n{} more in `failures.csv`.\n", skipped.len() - limit));
+    }
+    out
+}
+
+/// CSV of the failure lines, then the skipped lines (`kind`: `failure` or `skipped_line`; the
+/// `error` of a skipped line is why it was skipped, `superseded` is empty).
+pub fn failures_csv(failures: &[FailureLine], skipped: &[SkippedLine], files: &[InputFile]) -> String {
     let headers: Vec<String> =
-        ["file", "line", "uid", "method", "view_space", "budget", "seed", "superseded", "error"]
+        ["kind", "file", "line", "uid", "method", "view_space", "budget", "seed", "superseded", "error"]
             .iter()
             .map(|s| s.to_string())
             .collect();
-    let rows: Vec<Vec<String>> = failures
+    let file = |s: Source| files.get(s.file).map(|i| i.path.display().to_string()).unwrap_or_default();
+    let mut rows: Vec<Vec<String>> = failures
         .iter()
         .map(|f| {
             vec![
-                files.get(f.source.file).map(|i| i.path.display().to_string()).unwrap_or_default(),
+                "failure".to_string(),
+                file(f.source),
                 f.source.line.to_string(),
                 f.uid.clone(),
                 f.method.clone(),
@@ -587,6 +625,20 @@ pub fn failures_csv(failures: &[FailureLine], files: &[InputFile]) -> String {
             ]
         })
         .collect();
+    rows.extend(skipped.iter().map(|s| {
+        vec![
+            "skipped_line".to_string(),
+            file(s.source),
+            s.source.line.to_string(),
+            s.uid.clone(),
+            s.method.clone(),
+            s.view_space.clone(),
+            s.budget.clone(),
+            s.seed.map(|x| x.to_string()).unwrap_or_default(),
+            String::new(),
+            s.reason.clone(),
+        ]
+    }));
     csv(&headers, &rows)
 }
 

@@ -4,12 +4,14 @@
 //!
 //! Output folder ([`OUTPUT_FILES`], then the figures):
 //! - `report.md`: header (version, inputs with line counts, settings, warnings), Tables 2–5,
-//!   the terminal-reason summary, failure lines, and links to the figures;
-//! - `report.json`: the same provenance, counts, duplicates, failures and every table as data;
+//!   the terminal-reason summary, failure lines, skipped lines (when there are some), and links
+//!   to the figures;
+//! - `report.json`: the same provenance, counts, duplicates, failures, skipped lines and every
+//!   table as data;
 //! - `summary.csv` (every (setting, view space, method) with means and standard deviations),
 //!   `table2_quality_top.csv`, `table3_path_top.csv`, `table4_reachability.csv`,
 //!   `table5_map_stabilization.csv` (only with annotations), `terminal_reasons.csv`,
-//!   `failures.csv`;
+//!   `failures.csv` (failure lines, then skipped lines; the `kind` column says which);
 //! - `nsc_vs_views_<space>.{png,svg}`, `path_cost_vs_nsc_<space>.{png,svg}` and `figures.json`
 //!   (every plotted number), unless plots are turned off.
 
@@ -22,7 +24,7 @@ use serde_json::{json, Value};
 
 use crate::aggregate::{aggregates, group_picks, Aggregate};
 use crate::format::{markdown_table, plural, Align};
-use crate::load::{load_results, Duplicate, DuplicateKind, FailureLine, InputFile};
+use crate::load::{load_results, Duplicate, DuplicateKind, FailureLine, InputFile, SkippedLine};
 use crate::plots::{
     nsc_curves, tradeoff_points, write_figures, Curve, FigureContext, FigureFiles, TradeoffPoint,
 };
@@ -150,6 +152,8 @@ pub struct Counts {
     pub failure_lines: usize,
     /// Failure lines with a result for the same episode.
     pub failures_superseded: usize,
+    /// Lines skipped as unusable (not JSON, not an episode result, …).
+    pub skipped_lines: usize,
     /// Episodes dropped for a later line with the same key.
     pub duplicates_same_key: usize,
     /// Iterative runs dropped for a longer run under another budget label.
@@ -183,6 +187,8 @@ pub struct Report {
     pub taus: Vec<String>,
     /// Failure lines, in input order.
     pub failures: Vec<FailureLine>,
+    /// Skipped lines, in input order.
+    pub skipped: Vec<SkippedLine>,
     /// Dropped duplicate episodes.
     pub duplicates: Vec<Duplicate>,
     /// Warnings shown in the Markdown header and `report.json`.
@@ -259,6 +265,7 @@ pub fn build_report(
         episodes: episodes.len(),
         failure_lines: loaded.failures.len(),
         failures_superseded: loaded.failures.iter().filter(|f| f.superseded).count(),
+        skipped_lines: loaded.skipped.len(),
         duplicates_same_key: count_dup(DuplicateKind::SameKey),
         duplicates_iterative_budgets: count_dup(DuplicateKind::IterativeBudgets),
         unused_episodes: unused.values().sum(),
@@ -267,6 +274,13 @@ pub fn build_report(
     };
 
     let mut warnings = Vec::new();
+    if counts.skipped_lines > 0 {
+        warnings.push(format!(
+            "{} skipped: not usable as episode results or failure lines (each with its file, line and \
+             reason under Skipped lines, in report.json and in failures.csv).",
+            plural(counts.skipped_lines, "line")
+        ));
+    }
     for f in loaded.files.iter().filter(|f| f.torn_last_line) {
         warnings.push(format!("{}: torn last line skipped (an interrupted run).", f.path.display()));
     }
@@ -335,6 +349,7 @@ pub fn build_report(
         methods,
         taus: loaded.taus.clone(),
         failures: loaded.failures.clone(),
+        skipped: loaded.skipped.clone(),
         duplicates: loaded.duplicates.clone(),
         warnings,
         curves: nsc_curves(episodes, tau),
@@ -349,19 +364,23 @@ pub fn build_report(
 }
 
 impl Report {
-    /// The tables (2–5, terminal reasons, failure lines) in Markdown, for the terminal.
+    /// The tables (2–5, terminal reasons, failure lines, skipped lines if any) in Markdown, for
+    /// the terminal.
     pub fn markdown(&self) -> String {
         let s = &self.settings;
         let tau = s.tau.as_str();
-        [
+        let mut parts = vec![
             render::quality_markdown(&self.quality, tau, s.top),
             render::path_markdown(&self.path_efficient, tau, s.top, s.quality_threshold),
             render::reach_markdown(&self.reachability, tau),
             render::ms_markdown(self.map_stabilization.as_ref(), tau),
             render::terminal_markdown(&self.terminal),
             render::failures_markdown(&self.failures, &self.inputs, s.failures_listed),
-        ]
-        .join("\n")
+        ];
+        if !self.skipped.is_empty() {
+            parts.push(render::skipped_markdown(&self.skipped, &self.inputs, s.failures_listed));
+        }
+        parts.join("\n")
     }
 
     /// The header of `report.md`: version, inputs, settings, counts, warnings.
@@ -378,6 +397,7 @@ impl Report {
                     f.lines.to_string(),
                     f.episodes.to_string(),
                     f.failures.to_string(),
+                    f.skipped.to_string(),
                     if f.torn_last_line { "yes".into() } else { "no".into() },
                 ]
             })
@@ -388,6 +408,7 @@ impl Report {
                 ("Lines", Align::Right),
                 ("Episodes", Align::Right),
                 ("Failures", Align::Right),
+                ("Skipped", Align::Right),
                 ("Torn last line", Align::Left),
             ],
             &rows,
@@ -477,6 +498,7 @@ impl Report {
             "warnings": self.warnings,
             "duplicates": val(&self.duplicates),
             "failures": val(&self.failures),
+            "skipped_lines": val(&self.skipped),
             "tables": {
                 "table2_quality_top": val(&self.quality),
                 "table3_path_top": val(&self.path_efficient),
@@ -537,7 +559,7 @@ impl Report {
             put(TABLE5_CSV, render::ms_csv(t, tau))?;
         }
         put(TERMINAL_CSV, render::terminal_csv(&self.terminal))?;
-        put(FAILURES_CSV, render::failures_csv(&self.failures, &self.inputs))?;
+        put(FAILURES_CSV, render::failures_csv(&self.failures, &self.skipped, &self.inputs))?;
         written.extend(figure_paths);
         Ok(written)
     }

@@ -458,7 +458,7 @@ fn writing_gives_every_file_and_identical_bytes_twice() {
     for text in [
         &format!("objview-report {}", crate::VERSION),
         "| `",
-        "a.jsonl` | 10 | 9 | 1 | no |",
+        "a.jsonl` | 10 | 9 | 1 | 0 | no |",
         "| K=5 | 1 | beta | Hybrid | 6.0 | 0.750 | 5.00 | <0.1 | 2 |",
         "| K=30 | ref | oracle | Oracle | 13.0 | 0.975 | 12.00 | <0.1 | 4 |",
         "| alpha | Classical | K=30 | 1 | 31.0/31.0 | 0.900/0.800 | 0.100 | 0.720/0.640 | 0.080 |",
@@ -506,48 +506,104 @@ fn plots_can_be_turned_off() {
     assert_eq!(names, expected);
 }
 
-fn load_error(lines: &[String], settings: &ReportSettings) -> String {
+/// The reasons of the lines skipped in a file of `lines` (as `line: reason`), and the report.
+fn skipped(lines: &[String], settings: &ReportSettings) -> (Vec<String>, Report) {
     let dir = tempfile::tempdir().unwrap();
     let path = write_lines(dir.path(), "bad.jsonl", lines);
-    match build_report(&[path], &[], settings) {
-        Err(e) => e.to_string(),
-        Ok(_) => panic!("no error for {lines:?}"),
-    }
+    let r = build_report(&[path], &[], settings).unwrap_or_else(|e| panic!("{e} for {lines:?}"));
+    let reasons = r.skipped.iter().map(|s| format!("{}: {}", s.source.line, s.reason)).collect();
+    (reasons, r)
+}
+
+/// The single skipped line's `line: reason` of `lines`.
+fn skipped_one(lines: &[String], settings: &ReportSettings) -> String {
+    let (reasons, _) = skipped(lines, settings);
+    assert_eq!(reasons.len(), 1, "{reasons:?}");
+    reasons[0].clone()
 }
 
 #[test]
-fn bad_lines_are_errors_naming_file_and_line() {
+fn bad_lines_are_skipped_and_listed_with_their_line_and_reason() {
     let ok = Spec::new("o1", "alpha").line();
     let d = ReportSettings::default();
-    let e = load_error(&[ok.clone(), "{\"uid\": ".into(), ok.clone()], &d);
-    assert!(e.contains("bad.jsonl:2: not JSON"), "{e}");
-    let e = load_error(&[ok.clone(), "{\"uid\": \"o1\"}".into()], &d);
-    assert!(e.contains("bad.jsonl:2: not an episode result"), "{e}");
-    let e = load_error(&[annotation("o1", 30, Some(10), false).to_string()], &d);
-    assert!(e.contains("bad.jsonl:1: an `objview annotate` line, not an episode result"), "{e}");
-    let e = load_error(&["[1, 2]".into()], &d);
-    assert!(e.contains("bad.jsonl:1: not a JSON object"), "{e}");
-    let e = load_error(&[Spec { mode: "greedy", ..Spec::new("o1", "alpha") }.line()], &d);
-    assert!(e.contains("bad.jsonl:1: unknown execution_mode 'greedy'"), "{e}");
-    let e = load_error(&[Spec { budget: "many", ..Spec::new("o1", "alpha") }.line()], &d);
-    assert!(e.contains("bad.jsonl:1: budget must be"), "{e}");
-    let e = load_error(std::slice::from_ref(&ok), &ReportSettings { tau: "0.05".into(), ..d.clone() });
-    assert!(e.contains("bad.jsonl:1: checkpoint `K=10` has no NSC@0.05"), "{e}");
+    let (reasons, r) = skipped(&[ok.clone(), "{\"uid\": ".into(), ok.clone()], &d);
+    assert!(reasons.len() == 1 && reasons[0].starts_with("2: not JSON"), "{reasons:?}");
+    assert_eq!((r.counts.episodes, r.counts.episode_lines, r.counts.skipped_lines), (1, 2, 1));
+    assert_eq!((r.inputs[0].lines, r.inputs[0].episodes, r.inputs[0].skipped), (3, 2, 1));
+    let e = skipped_one(&[ok.clone(), "{\"uid\": \"o1\"}".into()], &d);
+    assert!(e.starts_with("2: not an episode result"), "{e}");
+    let e = skipped_one(&[annotation("o1", 30, Some(10), false).to_string()], &d);
+    assert!(e.starts_with("1: an `objview annotate` line, not an episode result"), "{e}");
+    let e = skipped_one(&["[1, 2]".into()], &d);
+    assert!(e.starts_with("1: not a JSON object"), "{e}");
+    let e = skipped_one(&[Spec { mode: "greedy", ..Spec::new("o1", "alpha") }.line()], &d);
+    assert!(e.starts_with("1: unknown execution_mode 'greedy'"), "{e}");
+    let e = skipped_one(&[Spec { budget: "many", ..Spec::new("o1", "alpha") }.line()], &d);
+    assert!(e.starts_with("1: budget must be"), "{e}");
+    let e = skipped_one(std::slice::from_ref(&ok), &ReportSettings { tau: "0.05".into(), ..d.clone() });
+    assert!(e.starts_with("1: checkpoint `K=10` has no NSC@0.05"), "{e}");
     let mut no_terminal = Spec::new("o1", "alpha").build();
     no_terminal.checkpoints.remove("terminal");
-    let e = load_error(&[serde_json::to_string(&no_terminal).unwrap()], &d);
-    assert!(e.contains("bad.jsonl:1: no `terminal` checkpoint"), "{e}");
+    let e = skipped_one(&[serde_json::to_string(&no_terminal).unwrap()], &d);
+    assert!(e.starts_with("1: no `terminal` checkpoint"), "{e}");
+    // A later line that contradicts its method's family is the one skipped.
     let other_family = Spec { uid: "o2", family: "learned", ..Spec::new("o2", "alpha") }.line();
-    let e = load_error(&[ok.clone(), other_family], &d);
-    assert!(e.contains("bad.jsonl:2: method 'alpha' has family 'learned' here but 'classical' at"), "{e}");
-    assert!(e.contains("bad.jsonl:1"), "{e}");
-    // Settings and inputs.
+    let (reasons, r) = skipped(&[ok.clone(), other_family], &d);
+    assert_eq!(reasons.len(), 1, "{reasons:?}");
+    assert!(
+        reasons[0].starts_with("2: method 'alpha' has family 'learned' here but 'classical' at"),
+        "{reasons:?}"
+    );
+    assert!(reasons[0].ends_with("bad.jsonl:1"), "{reasons:?}");
+    assert_eq!((r.counts.episodes, r.skipped[0].uid.as_str()), (1, "o2"));
+    // Settings and inputs are still errors.
     let e = build_report(&[], &[], &d).unwrap_err();
     assert!(matches!(e, ReportError::NoInputs));
-    let e = load_error(std::slice::from_ref(&ok), &ReportSettings { top: 0, ..d.clone() });
-    assert!(e.contains("invalid setting top"), "{e}");
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_lines(dir.path(), "r.jsonl", std::slice::from_ref(&ok));
+    let e =
+        build_report(std::slice::from_ref(&path), &[], &ReportSettings { top: 0, ..d.clone() }).unwrap_err();
+    assert!(e.to_string().contains("invalid setting top"), "{e}");
     let e = build_report(&[PathBuf::from("/no/such/file.jsonl")], &[], &d).unwrap_err().to_string();
     assert!(e.contains("/no/such/file.jsonl"), "{e}");
+}
+
+#[test]
+fn a_result_with_a_null_number_is_skipped_and_the_rest_of_the_file_is_reported() {
+    // What a huge pose used to leave in a server export: `"path_cost": null`.
+    let mut poisoned: serde_json::Value = serde_json::from_str(&Spec::new("o9", "alpha").line()).unwrap();
+    poisoned["steps"][3]["path_cost"] = serde_json::Value::Null;
+    let lines = [Spec::new("o1", "alpha").line(), poisoned.to_string(), Spec::new("o2", "alpha").line()];
+    let (reasons, r) = skipped(&lines, &ReportSettings::default());
+    assert_eq!(reasons.len(), 1, "{reasons:?}");
+    assert!(
+        reasons[0].starts_with("2: not an episode result (invalid type: null, expected f64"),
+        "{reasons:?}"
+    );
+    let s = &r.skipped[0];
+    assert_eq!(
+        (s.uid.as_str(), s.method.as_str(), s.view_space.as_str(), s.seed),
+        ("o9", "alpha", "whole", Some(0))
+    );
+    assert_eq!((r.counts.episodes, r.counts.objects), (2, 2));
+    assert!(r.warnings.iter().any(|w| w.starts_with("1 line skipped")), "{:?}", r.warnings);
+    // Listed in the terminal output and every file that lists failures.
+    let md = r.markdown();
+    assert!(md.contains("## Skipped lines"), "{md}");
+    assert!(md.contains("bad.jsonl:2 | o9 | alpha | whole | auto | 0 | not an episode result"), "{md}");
+    let out = tempfile::tempdir().unwrap();
+    r.write(out.path()).unwrap();
+    let read = |n: &str| std::fs::read_to_string(out.path().join(n)).unwrap();
+    assert!(read("report.md").contains("## Skipped lines"));
+    let json: serde_json::Value = serde_json::from_str(&read("report.json")).unwrap();
+    assert_eq!(json["skipped_lines"][0]["source"]["line"], 2);
+    assert_eq!(json["counts"]["skipped_lines"], 1);
+    let csv = read("failures.csv");
+    let row = csv.lines().find(|l| l.starts_with("skipped_line,")).unwrap_or_else(|| panic!("{csv}"));
+    assert!(
+        row.contains("bad.jsonl,2,o9,alpha,whole,auto,0,,\"not an episode result (invalid type: null"),
+        "{row}"
+    );
 }
 
 #[test]

@@ -1,7 +1,8 @@
 //! The routes of docs/server-api.md (v1). Handlers parse and validate the request, then run the
 //! episode operation of [`crate::state`] on tokio's blocking pool (engine work is CPU-bound).
 //! Every error is `{"error": {"code", "message"}}` with the contract's status, including unknown
-//! routes (404), wrong methods (405) and bodies over [`BODY_LIMIT`] (413).
+//! routes (404), wrong methods (405), bodies over [`BODY_LIMIT`] (413) and bodies slower than
+//! the body time limit (408).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -63,23 +64,65 @@ async fn wrong_method(req: Request) -> ApiError {
     ApiError::MethodNotAllowed(format!("{} is not allowed on {}", req.method(), req.uri().path()))
 }
 
-/// A JSON request body: 413 over the limit, 400 when it is not JSON.
+/// A JSON request body: 413 over the limit, 408 when it does not arrive within the body time
+/// limit, 400 when it is not JSON, 422 for a number out of range ([`parse_body`]).
 struct Body(Value);
 
-impl<S: Send + Sync> FromRequest<S> for Body {
+impl FromRequest<Arc<AppState>> for Body {
     type Rejection = ApiError;
 
-    async fn from_request(req: Request, state: &S) -> Result<Body, ApiError> {
-        let bytes = Bytes::from_request(req, state).await.map_err(|e| {
-            if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
-                ApiError::PayloadTooLarge(format!("the body is over the limit of {BODY_LIMIT} bytes"))
-            } else {
-                ApiError::MalformedJson(format!("the body could not be read: {e}"))
-            }
-        })?;
-        serde_json::from_slice(&bytes)
-            .map(Body)
-            .map_err(|e| ApiError::MalformedJson(format!("the body is not JSON: {e}")))
+    async fn from_request(req: Request, state: &Arc<AppState>) -> Result<Body, ApiError> {
+        let limit = state.limits.body_timeout;
+        // While the body arrives, the connection may be closed to make room for another.
+        let receiving = req.extensions().get::<crate::conn::ConnHandle>().map(|c| c.receiving_body());
+        let read = tokio::time::timeout(limit, Bytes::from_request(req, state)).await;
+        drop(receiving);
+        let bytes = read
+            .map_err(|_| {
+                ApiError::RequestTimeout(format!(
+                    "the body did not arrive within {} s (--body-timeout)",
+                    limit.as_secs_f64()
+                ))
+            })?
+            .map_err(|e| {
+                if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+                    ApiError::PayloadTooLarge(format!("the body is over the limit of {BODY_LIMIT} bytes"))
+                } else {
+                    ApiError::MalformedJson(format!("the body could not be read: {e}"))
+                }
+            })?;
+        parse_body(&bytes).map(Body)
+    }
+}
+
+/// Whether a parse error is serde_json's "number out of range": JSON syntax that is fine, with a
+/// number beyond f64 (`1e400`). serde_json files it as a syntax error and exposes no code for it,
+/// only its message (pinned by a test).
+fn number_out_of_range(e: &serde_json::Error) -> bool {
+    e.classify() == serde_json::error::Category::Syntax && e.to_string().starts_with("number out of range")
+}
+
+/// Parses a request body. Not JSON → 400 `malformed_json`; valid JSON with a number out of the
+/// f64 range → 422 `invalid_request` naming where it is (`action.pose[0]`), like any other value
+/// of the wrong kind.
+pub fn parse_body(bytes: &[u8]) -> Result<Value, ApiError> {
+    match serde_json::from_slice(bytes) {
+        Ok(v) => Ok(v),
+        // Out of range, but otherwise JSON (checking syntax only does not convert numbers).
+        Err(e)
+            if number_out_of_range(&e) && serde_json::from_slice::<serde::de::IgnoredAny>(bytes).is_ok() =>
+        {
+            // Again, tracking the path, to name the field.
+            let mut de = serde_json::Deserializer::from_slice(bytes);
+            let at = match serde_path_to_error::deserialize::<_, Value>(&mut de) {
+                Err(p) => p.path().to_string(),
+                Ok(_) => ".".to_string(),
+            };
+            Err(ApiError::InvalidRequest(format!(
+                "`{at}`: a number out of range (a pose or any number must be a finite 64-bit float): {e}"
+            )))
+        }
+        Err(e) => Err(ApiError::MalformedJson(format!("the body is not JSON: {e}"))),
     }
 }
 
@@ -268,14 +311,22 @@ async fn rgb(
     Ok((h, png).into_response())
 }
 
-/// A pose of a request: 7 finite numbers.
-fn parse_pose(v: &Value) -> Option<Pose> {
-    let a = v.as_array().filter(|a| a.len() == 7)?;
+/// Pose `i` of a feasibility query: 7 numbers that pass [`objview_episode::check_pose`]
+/// (finite, centre and look-at within the bound).
+fn parse_pose(i: usize, v: &Value) -> Result<Pose, ApiError> {
+    let a = v
+        .as_array()
+        .filter(|a| a.len() == 7)
+        .ok_or_else(|| ApiError::InvalidRequest(format!("`poses[{i}]` is not 7 finite numbers: {v}")))?;
     let mut out = [0.0; 7];
-    for (o, x) in out.iter_mut().zip(a) {
-        *o = x.as_f64()?;
+    for (j, (o, x)) in out.iter_mut().zip(a).enumerate() {
+        *o = x.as_f64().ok_or_else(|| {
+            ApiError::InvalidRequest(format!(
+                "`poses[{i}][{j}]` is not a number: {x} (a pose is 7 finite numbers)"
+            ))
+        })?;
     }
-    Pose::from_array(out)
+    objview_episode::check_pose(&out).map_err(|e| ApiError::InvalidRequest(format!("`poses[{i}]`: {e}")))
 }
 
 async fn feasible(
@@ -295,14 +346,7 @@ async fn feasible(
             list.len()
         )));
     }
-    let poses = list
-        .iter()
-        .enumerate()
-        .map(|(i, p)| {
-            parse_pose(p)
-                .ok_or_else(|| ApiError::InvalidRequest(format!("`poses[{i}]` is not 7 finite numbers: {p}")))
-        })
-        .collect::<Result<Vec<_>, _>>()?;
+    let poses = list.iter().enumerate().map(|(i, p)| parse_pose(i, p)).collect::<Result<Vec<_>, _>>()?;
     let mask = st.feasible(&slot, &poses)?;
     Ok(Json(json!({ "feasible": mask })))
 }
@@ -394,4 +438,42 @@ async fn method_results(
         body.push('\n');
     }
     Ok(([(CONTENT_TYPE, "application/x-ndjson")], body).into_response())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_number_out_of_the_f64_range_is_a_422_naming_its_field() {
+        let e = parse_body(br#"{"step": 0, "action": {"type": "move", "pose": [1e400, 0, 0, 0, 0, 0, 0]}}"#)
+            .unwrap_err();
+        assert_eq!(e.status(), StatusCode::UNPROCESSABLE_ENTITY, "{e}");
+        assert!(e.to_string().starts_with("`action.pose[0]`: a number out of range"), "{e}");
+        let e = parse_body(br#"{"poses": [[3, 0, 0, 0, 0, 0, 0], [3, 0, 0, 0, 0, -1e999, 0]]}"#).unwrap_err();
+        assert!(e.to_string().starts_with("`poses[1][5]`:"), "{e}");
+        let e = parse_body(b"1e400").unwrap_err();
+        assert_eq!(e.code(), "invalid_request", "{e}");
+    }
+
+    #[test]
+    fn what_is_not_json_stays_a_400() {
+        let bad: [&[u8]; 6] = [b"{not json", b"", b"[1, 2", b"{\"a\": 1} x", b"1e", b"[1e400"];
+        for bad in bad {
+            let e = parse_body(bad).unwrap_err();
+            assert_eq!(e.code(), "malformed_json", "{e}");
+        }
+        // Tiny numbers round to 0: not out of range.
+        assert_eq!(parse_body(b"[1e-400]").unwrap(), json!([0.0]));
+    }
+
+    #[test]
+    fn feasibility_poses_are_bounded_like_moves() {
+        assert!(parse_pose(0, &json!([3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])).is_ok());
+        let e = parse_pose(2, &json!([1e300, 1e300, 1e300, 0.0, 0.0, 0.0, 0.0])).unwrap_err();
+        assert_eq!(e.status(), StatusCode::UNPROCESSABLE_ENTITY);
+        assert!(e.to_string().starts_with("`poses[2]`: the camera centre is 1.732e300 object units"), "{e}");
+        let e = parse_pose(0, &json!([3.0, 0.0, 0.0, 0.0, "0", 0.0, 0.0])).unwrap_err();
+        assert!(e.to_string().starts_with("`poses[0][4]` is not a number"), "{e}");
+    }
 }

@@ -290,10 +290,17 @@ impl Environment for RemoteEnv<'_> {
     }
 
     fn feasible_mask(&self, poses: &[Pose]) -> Vec<bool> {
+        // A pose beyond the bound is infeasible, as locally; the server would refuse the whole
+        // batch (422) for it.
+        let in_bounds = |p: &Pose| objview_episode::check_pose(&p.to_array()).is_ok();
         let missing: Vec<Pose> = {
             let cache = self.cache.borrow();
             let mut seen = std::collections::HashSet::new();
-            poses.iter().filter(|p| !cache.contains_key(&key(p)) && seen.insert(key(p))).copied().collect()
+            poses
+                .iter()
+                .filter(|p| in_bounds(p) && !cache.contains_key(&key(p)) && seen.insert(key(p)))
+                .copied()
+                .collect()
         };
         if !missing.is_empty() {
             match self.client.feasible(self.id, &missing) {
@@ -310,7 +317,7 @@ impl Environment for RemoteEnv<'_> {
             }
         }
         let cache = self.cache.borrow();
-        poses.iter().map(|p| cache.get(&key(p)).copied().unwrap_or(false)).collect()
+        poses.iter().map(|p| in_bounds(p) && cache.get(&key(p)).copied().unwrap_or(false)).collect()
     }
 
     fn history(&self) -> &[Pose] {

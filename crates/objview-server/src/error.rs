@@ -2,6 +2,7 @@
 //! wire code (docs/server-api.md) and renders as `{"error": {"code", "message"}}`; an error
 //! response never changes an episode. [`ServerError`] is what starting a server can fail with.
 
+use axum::http::header::{HeaderValue, CONNECTION};
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use serde_json::json;
@@ -36,6 +37,14 @@ pub enum ApiError {
     /// 413 `payload_too_large`: the body is over the limit.
     #[error("{0}")]
     PayloadTooLarge(String),
+    /// 408 `request_timeout`: the body did not arrive within the body time limit (the
+    /// connection is closed after the answer).
+    #[error("{0}")]
+    RequestTimeout(String),
+    /// 503 `overloaded`: every connection the server keeps open is busy with a request (the
+    /// connection is closed after the answer).
+    #[error("{0}")]
+    Overloaded(String),
     /// 500 `internal`: the server failed (an object that does not load, the database); the
     /// message never names files.
     #[error("{0}")]
@@ -55,6 +64,8 @@ impl ApiError {
                 StatusCode::CONFLICT
             }
             ApiError::PayloadTooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,
+            ApiError::RequestTimeout(_) => StatusCode::REQUEST_TIMEOUT,
+            ApiError::Overloaded(_) => StatusCode::SERVICE_UNAVAILABLE,
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -71,6 +82,8 @@ impl ApiError {
             ApiError::EpisodeFinished(_) => "episode_finished",
             ApiError::EpisodeRunning(_) => "episode_running",
             ApiError::PayloadTooLarge(_) => "payload_too_large",
+            ApiError::RequestTimeout(_) => "request_timeout",
+            ApiError::Overloaded(_) => "overloaded",
             ApiError::Internal(_) => "internal",
         }
     }
@@ -83,7 +96,11 @@ impl ApiError {
 
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
-        (self.status(), axum::Json(self.body())).into_response()
+        let mut r = (self.status(), axum::Json(self.body())).into_response();
+        if matches!(self, ApiError::RequestTimeout(_) | ApiError::Overloaded(_)) {
+            r.headers_mut().insert(CONNECTION, HeaderValue::from_static("close"));
+        }
+        r
     }
 }
 

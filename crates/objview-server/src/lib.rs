@@ -6,6 +6,7 @@
 //! - [`db`] — persistence (SQLite, WAL) and `objview export`.
 //! - [`pool`] — split files and the cache of prepared scenes.
 //! - [`auth`] — bearer tokens and episode owners; [`error`] — errors and their statuses.
+//! - [`conn`] — the accept loop: connection cap, header / idle time limits.
 //! - [`spec`] — the result-line settings record shared with local `objview run`.
 //! - [`client`] — a blocking client, and the driver that runs a local [`objview_episode::Planner`]
 //!   against a server (`objview run --server`).
@@ -17,6 +18,7 @@
 pub mod api;
 pub mod auth;
 pub mod client;
+pub mod conn;
 pub mod db;
 pub mod error;
 pub mod load;
@@ -57,6 +59,14 @@ pub struct ServerConfig {
     pub normalize: Normalization,
     /// Prepared scenes kept in memory (least recently used dropped first).
     pub scene_cache: usize,
+    /// Open connections at most (lowered to fit the descriptor limit; see [`conn`]).
+    pub max_connections: usize,
+    /// Seconds from the first byte of a request to the end of its head.
+    pub header_timeout_s: f64,
+    /// Seconds a handler waits for a request body (408 after).
+    pub body_timeout_s: f64,
+    /// Seconds a connection without a request in progress stays open after its last activity.
+    pub idle_timeout_s: f64,
 }
 
 impl Default for ServerConfig {
@@ -71,6 +81,10 @@ impl Default for ServerConfig {
             cache_dir: None,
             normalize: Normalization::Unit,
             scene_cache: pool::DEFAULT_SCENE_CACHE,
+            max_connections: conn::DEFAULT_MAX_CONNECTIONS,
+            header_timeout_s: conn::DEFAULT_HEADER_TIMEOUT_S,
+            body_timeout_s: conn::DEFAULT_BODY_TIMEOUT_S,
+            idle_timeout_s: conn::DEFAULT_IDLE_TIMEOUT_S,
         }
     }
 }
@@ -86,9 +100,29 @@ fn seconds(name: &str, s: f64) -> Result<Duration, ServerError> {
 /// Loads the pool, opens the database, reads the tokens and finishes the episodes a previous
 /// server left running (replayed, ended `exception` / `interrupted`).
 pub fn build_state(cfg: &ServerConfig) -> Result<Arc<AppState>, ServerError> {
+    if cfg.max_connections == 0 {
+        return Err(ServerError::Config("--max-connections must be at least 1".into()));
+    }
+    let fd_limit = conn::descriptor_limit();
+    let max_connections = conn::fit_descriptor_limit(cfg.max_connections, fd_limit);
+    if max_connections < cfg.max_connections {
+        eprintln!(
+            "objview serve: --max-connections {} lowered to {max_connections}: the descriptor limit \
+             (ulimit -n) is {}, and {} descriptors are kept for files and the database",
+            cfg.max_connections,
+            fd_limit.unwrap_or_default(),
+            conn::DESCRIPTOR_RESERVE
+        );
+    }
     let limits = state::Limits {
         action_timeout: seconds("--action-timeout", cfg.action_timeout_s)?,
         start_timeout: seconds("--start-timeout", cfg.start_timeout_s)?,
+        body_timeout: seconds("--body-timeout", cfg.body_timeout_s)?,
+        conn: conn::ConnLimits {
+            max_connections,
+            header_timeout: seconds("--header-timeout", cfg.header_timeout_s)?,
+            idle_timeout: seconds("--idle-timeout", cfg.idle_timeout_s)?,
+        },
     };
     if cfg.pool.is_empty() {
         return Err(ServerError::Config("no split files (--pool SPLIT.json)".into()));
@@ -100,8 +134,8 @@ pub fn build_state(cfg: &ServerConfig) -> Result<Arc<AppState>, ServerError> {
     Ok(Arc::new(AppState::new(pool, scenes, db, tokens, limits)?))
 }
 
-/// Serves the API on `listener` until `shutdown` resolves; a background task ends episodes
-/// whose client is late.
+/// Serves the API on `listener` until `shutdown` resolves (connections under the limits of
+/// [`conn`]); a background task ends episodes whose client is late.
 pub async fn serve(
     listener: tokio::net::TcpListener,
     state: Arc<AppState>,
@@ -119,10 +153,11 @@ pub async fn serve(
             let _ = tokio::task::spawn_blocking(move || s.sweep()).await;
         }
     });
+    let (registry, limits) = (state.connections.clone(), state.limits.conn);
     let app = api::router(state);
-    let r = axum::serve(listener, app).with_graceful_shutdown(shutdown).await;
+    conn::serve(listener, app, registry, limits, shutdown).await;
     sweeper.abort();
-    r.map_err(|e| ServerError::Io(format!("serving: {e}")))
+    Ok(())
 }
 
 /// `objview serve`: builds the state, binds `addr`, calls `ready` with the bound address and

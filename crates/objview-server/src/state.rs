@@ -341,6 +341,35 @@ pub fn apply_raw(ep: &mut Episode, action: &Value, planner_seconds: f64) {
     }
 }
 
+/// The stored line of a finished episode (without its newline): its result line, or — should a
+/// number of the result be NaN or infinite, which JSON would write as `null` and no reader of
+/// results accepts — a failure line (`error`, as `objview run` writes for an episode that could
+/// not run) that still has the episode's keys, `settings`, `visited_poses` and terminal fields.
+pub fn result_line(id: &str, res: &objview_episode::EpisodeResult) -> String {
+    let Some(field) = res.non_finite() else {
+        return objview_dataset::to_line(res).trim_end().to_string();
+    };
+    eprintln!(
+        "objview serve: episode {id}: the result has a non-finite number at `{field}`; stored as a failure"
+    );
+    json!({
+        "uid": res.uid,
+        "method": res.method,
+        "family": res.family,
+        "execution_mode": res.execution_mode,
+        "view_space": res.view_space,
+        "budget": res.budget,
+        "seed": res.seed,
+        "settings": res.settings,
+        "visited_poses": res.visited_poses,
+        "terminal_source": res.terminal_source,
+        "terminal_reason": res.terminal_reason,
+        "terminal_detail": res.terminal_detail,
+        "error": format!("the result has a non-finite number at `{field}`; it is not recorded as a result"),
+    })
+    .to_string()
+}
+
 /// The current view: its step, pose and (while running) the engine's depth.
 type CurrentView = (usize, Pose, Option<Arc<Vec<f32>>>);
 
@@ -354,6 +383,10 @@ pub struct Limits {
     pub action_timeout: Duration,
     /// Wait for the first action after the create response.
     pub start_timeout: Duration,
+    /// Wait for a request body once its head arrived (408 after it).
+    pub body_timeout: Duration,
+    /// Connection cap and the header and idle limits ([`crate::conn`]).
+    pub conn: crate::conn::ConnLimits,
 }
 
 /// The server's shared state.
@@ -372,6 +405,8 @@ pub struct AppState {
     /// one of as many permits as there are cores, first come first served, so that many clients
     /// queue rather than slow every step down together.
     pub engine_gate: tokio::sync::Semaphore,
+    /// The open connections (their count, evictions and refusals).
+    pub connections: Arc<crate::conn::Registry>,
     candidate_sets: BTreeMap<String, Arc<Vec<Pose>>>,
     spaces: BTreeMap<String, ViewSpace>,
     episodes: Mutex<HashMap<String, Arc<Slot>>>,
@@ -413,6 +448,7 @@ impl AppState {
             engine_gate: tokio::sync::Semaphore::new(
                 std::thread::available_parallelism().map_or(1, |n| n.get()),
             ),
+            connections: Arc::default(),
             candidate_sets,
             spaces,
             episodes: Mutex::default(),
@@ -467,7 +503,7 @@ impl AppState {
                     ),
                 );
                 let res = ep.finish(record);
-                let line = objview_dataset::to_line(&res).trim_end().to_string();
+                let line = result_line(&row.id, &res);
                 self.db.record_end(&row.id, &row.owner, &row.method, &line).map_err(db_err)?;
                 eprintln!(
                     "objview serve: episode {} ended as interrupted ({} views)",
@@ -608,13 +644,13 @@ impl AppState {
     }
 
     /// Turns an ended running episode into a finished one; returns its result line.
-    fn finish(&self, _slot: &Slot, live: &mut Live) -> Result<String, ApiError> {
+    fn finish(&self, slot: &Slot, live: &mut Live) -> Result<String, ApiError> {
         let Live::Running(r) = std::mem::replace(live, Live::Finished(None)) else {
             return Err(ApiError::Internal("the episode had already finished".into()));
         };
         let r = *r;
         let res = r.ep.finish(r.record);
-        let line = objview_dataset::to_line(&res).trim_end().to_string();
+        let line = result_line(&slot.id, &res);
         *live = Live::Finished(Some(Box::new(Finished {
             history: res.visited_poses.clone(),
             terminal: TerminalInfo {
@@ -887,6 +923,55 @@ mod tests {
         for bad in ["", "a/b", "a b", "é", &"x".repeat(101)] {
             assert!(!valid_method_name(bad), "{bad}");
         }
+    }
+
+    /// A one-view result with step 0's CD = `cd`.
+    fn one_view_result(cd: f64) -> objview_episode::EpisodeResult {
+        let m = json!({"views": 1, "sc": {"0.02": 0.5}, "nsc": {"0.02": 0.5}, "cd": 0.1, "path_cost": 0.0,
+                       "runtime": 0.0});
+        let mut step = json!({"step": 0, "pose": [3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], "fused_points": 1,
+                              "ms_voxels": {}, "planner_seconds": 0.0, "engine_seconds": 0.0,
+                              "stage_seconds": [0.0, 0.0, 0.0, 0.0]});
+        let mut terminal = json!({"step": 0});
+        for (k, v) in m.as_object().unwrap() {
+            step[k] = v.clone();
+            terminal[k] = v.clone();
+        }
+        let mut r: objview_episode::EpisodeResult = serde_json::from_value(json!({
+            "settings": {"planner": "m"}, "uid": "cube", "method": "m", "family": "classical",
+            "execution_mode": "iterative", "view_space": "whole", "budget": "auto", "seed": 0,
+            "start_pose": [3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            "visited_poses": [[3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]],
+            "terminal_source": "algorithm_stop", "terminal_reason": "plan_end", "terminal_detail": "",
+            "steps": [step], "checkpoints": {"terminal": terminal},
+            "reference": {"points": 1, "views": 1, "view_set": "tammes-360", "observable_sc": {}, "key": ""},
+            "gt_points": 1, "gt_source": "sampled", "wall_seconds": 0.0
+        }))
+        .unwrap();
+        r.steps[0].metrics.cd = cd;
+        r
+    }
+
+    #[test]
+    fn a_finite_result_is_stored_as_its_result_line() {
+        let r = one_view_result(0.1);
+        let line = result_line("e-1", &r);
+        assert_eq!(serde_json::from_str::<objview_episode::EpisodeResult>(&line).unwrap(), r);
+    }
+
+    #[test]
+    fn a_result_with_a_non_finite_number_is_stored_as_a_failure_line_without_nulls() {
+        let line = result_line("e-1", &one_view_result(f64::INFINITY));
+        assert!(!line.contains("null"), "{line}");
+        let v: Value = serde_json::from_str(&line).unwrap();
+        assert!(v["error"].as_str().unwrap().contains("`steps[0].cd`"), "{v}");
+        assert_eq!(
+            (v["uid"].as_str(), v["method"].as_str(), v["budget"].as_str()),
+            (Some("cube"), Some("m"), Some("auto"))
+        );
+        // The server can still answer about the episode from it.
+        let f = Finished::from_line(&line).unwrap();
+        assert_eq!((f.history.len(), f.terminal.reason.as_str()), (1, "plan_end"));
     }
 
     #[test]

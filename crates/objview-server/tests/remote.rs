@@ -148,3 +148,57 @@ fn a_failing_planner_ends_both_ways_alike_and_the_oracle_is_refused() {
     assert!(matches!(err, ClientError::Unsupported(_)), "{err}");
     assert!(err.to_string().contains("ground truth"));
 }
+
+/// Asks for the feasibility of a huge, a non-finite and a good pose, moves to the first feasible
+/// one, then stops.
+struct Bounded {
+    moves: usize,
+}
+
+impl Planner for Bounded {
+    fn name(&self) -> &str {
+        "bounded"
+    }
+    fn family(&self) -> Family {
+        Family::Classical
+    }
+    fn execution_mode(&self) -> ExecutionMode {
+        ExecutionMode::Iterative
+    }
+    fn params(&self) -> serde_json::Value {
+        serde_json::json!({})
+    }
+    fn reset(&mut self, _: &EpisodeContext, _: &dyn Environment) -> Result<(), PlannerError> {
+        self.moves = 0;
+        Ok(())
+    }
+    fn act(&mut self, _: &Observation, env: &dyn Environment) -> Result<Action, PlannerError> {
+        self.moves += 1;
+        if self.moves > 1 {
+            return Ok(Action::Stop { reason: "plan_end".into() });
+        }
+        let poses = [
+            Pose { center: [1e300, 1e300, 1e300], look_at: [0.0; 3], roll: 0.0 },
+            Pose { center: [f64::NAN, 0.0, 3.0], look_at: [0.0; 3], roll: 0.0 },
+            Pose::from_direction([1.0, 0.0, 0.2], 3.0),
+        ];
+        let mask = env.feasible_mask(&poses);
+        if mask != [false, false, true] {
+            return Err(PlannerError(format!("feasibility {mask:?}")));
+        }
+        Ok(Action::move_to(&poses[2]))
+    }
+}
+
+#[test]
+fn poses_beyond_the_bound_are_infeasible_remotely_as_locally() {
+    let (cfg, _tmp) = config();
+    let s = start(&cfg);
+    let c = client(&s);
+    let local = local_line(&mut Bounded { moves: 0 }, "cube", "whole", Budget::Auto, 0);
+    let remote = remote_line(&c, &mut Bounded { moves: 0 }, "cube", "whole", Budget::Auto, 0).unwrap();
+    assert_eq!(remote, local);
+    let v: serde_json::Value = serde_json::from_str(&remote).unwrap();
+    assert_eq!(v["terminal_reason"], "plan_end", "{}", v["terminal_detail"]);
+    assert_eq!(v["visited_poses"].as_array().unwrap().len(), 2);
+}

@@ -46,6 +46,34 @@ impl Case {
         self.len() == 0
     }
 
+    /// Writes the files into `dir`, a folder reused from case to case: files of an earlier
+    /// case that this one does not have are removed, the others overwritten (much cheaper than
+    /// a fresh folder per case on a journaling file system). Returns the main file's path.
+    pub fn write_into_slot(&self, dir: &std::path::Path) -> std::io::Result<std::path::PathBuf> {
+        match std::fs::read_dir(dir) {
+            Ok(entries) => {
+                for e in entries {
+                    let e = e?;
+                    let keep = e.file_name().to_str().is_some_and(|n| self.files.iter().any(|(f, _)| f == n));
+                    if !keep {
+                        let p = e.path();
+                        if e.file_type()?.is_dir() {
+                            std::fs::remove_dir_all(p)?;
+                        } else {
+                            std::fs::remove_file(p)?;
+                        }
+                    }
+                }
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => std::fs::create_dir_all(dir)?,
+            Err(e) => return Err(e),
+        }
+        for (name, bytes) in &self.files {
+            std::fs::write(dir.join(name), bytes)?;
+        }
+        Ok(dir.join(&self.files[0].0))
+    }
+
     /// Writes the files into `dir` (created if needed); returns the main file's path.
     pub fn write_to(&self, dir: &std::path::Path) -> std::io::Result<std::path::PathBuf> {
         std::fs::create_dir_all(dir)?;
@@ -140,7 +168,7 @@ pub fn dictionary(kind: Kind) -> &'static [&'static str] {
         ],
         Kind::Split => &[
             "{\"mesh\":\"mesh.off\"},", "{\"mesh\":\"tri.obj\",\"uid\":\"a\"},", "\"gt_cloud\":\"c.pcd\",", "\"annotation\":{},",
-            "\"../mesh.off\"", "[", "{", "\"", ",", "null",
+            "\"sub/mesh.off\"", "[", "{", "\"", ",", "null",
         ],
         Kind::Annotations | Kind::Resume | Kind::Results => &[
             "{\"uid\":\"a\"}\n", "{\"uid\":\"a\",\"error\":\"e\"}\n", "\"terminal\"", "\"iterative\"", "\"budget\":\"0\",",

@@ -82,6 +82,9 @@ enum Cmd {
         /// Write findings as found, without shrinking them.
         #[arg(long)]
         no_minimize: bool,
+        /// Where cases are written (default: /dev/shm when it has 1 GiB free, else TMPDIR).
+        #[arg(long)]
+        work_dir: Option<PathBuf>,
         #[command(flatten)]
         limits: LimitArgs,
     },
@@ -160,7 +163,7 @@ fn real_main() -> Result<ExitCode, String> {
         }
         Cmd::One { kind, file, limits } => {
             let kind = limits.kind(&kind)?;
-            let work = tempfile::tempdir().map_err(|e| e.to_string())?;
+            let work = tempfile::tempdir_in(fuzz::default_work_root()).map_err(|e| e.to_string())?;
             let exec = objview_fuzz::exec::Executor {
                 exe: exe()?,
                 limits: limits.limits(),
@@ -183,7 +186,7 @@ fn real_main() -> Result<ExitCode, String> {
             println!("{} regression inputs, {bad} failing", all.len());
             Ok(if bad > 0 { ExitCode::from(1) } else { ExitCode::SUCCESS })
         }
-        Cmd::Run { seed, seconds, cases, kinds, out, jobs, batch, no_minimize, limits } => {
+        Cmd::Run { seed, seconds, cases, kinds, out, jobs, batch, no_minimize, work_dir, limits } => {
             let seed = seed.unwrap_or_else(|| {
                 std::time::SystemTime::now()
                     .duration_since(std::time::UNIX_EPOCH)
@@ -204,6 +207,7 @@ fn real_main() -> Result<ExitCode, String> {
             s.batch = batch;
             s.limits = limits.limits();
             s.minimize = !no_minimize;
+            s.work_root = work_dir;
             s.verbose = true;
             eprintln!(
                 "objview-fuzz run --seed {seed} --seconds {seconds} --jobs {jobs} ({} kinds)",

@@ -149,7 +149,8 @@ impl Kind {
             | Kind::Npy
             | Kind::Npz => "objview-geom",
             Kind::ViewSet | Kind::Rules => "objview-views",
-            Kind::Split | Kind::Annotations | Kind::Resume => "objview-dataset",
+            Kind::Split => "objview-dataset (objview-geom for the files it names)",
+            Kind::Annotations | Kind::Resume => "objview-dataset",
             Kind::Results => "objview-report",
             _ => "objview-fuzz (test kind)",
         }

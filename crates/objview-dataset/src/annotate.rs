@@ -446,7 +446,11 @@ pub fn read_annotations(paths: &[PathBuf]) -> Result<AnnotationSet, DatasetError
             let value: Value = serde_json::from_str(line).map_err(|e| corrupt(format!("not JSON ({e})")))?;
             let uid = value.get("uid").and_then(Value::as_str).unwrap_or_default().to_string();
             if let Some((p, l)) = seen.insert(uid.clone(), (path.clone(), i + 1)) {
-                return Err(corrupt(format!("uid '{uid}' already at {}:{l}", p.display())));
+                return Err(corrupt(format!(
+                    "uid '{}' already at {}:{l}",
+                    crate::error::one_line(&uid),
+                    p.display()
+                )));
             }
             if value.get("error").is_some() {
                 let f: Failure = serde_json::from_value(value)
@@ -460,4 +464,31 @@ pub fn read_annotations(paths: &[PathBuf]) -> Result<AnnotationSet, DatasetError
         }
     }
     Ok(set)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn read_annotations_errors_are_one_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.jsonl");
+        let fail = |uid: &str| {
+            serde_json::json!({"uid": uid, "mesh": "m.obj", "error": "e", "settings": {}, "version": "0"})
+                .to_string()
+        };
+        // Failure lines are read; a torn last line is ignored.
+        std::fs::write(&path, format!("{}\n{}\n{{\"uid\":", fail("a"), fail("b"))).unwrap();
+        let set = read_annotations(std::slice::from_ref(&path)).unwrap();
+        assert_eq!(set.failures.len(), 2);
+        // A uid seen twice is an error naming it, on one line even when the uid holds a newline.
+        std::fs::write(&path, format!("{}\n{}\n", fail("x\ny"), fail("x\ny"))).unwrap();
+        let msg = read_annotations(std::slice::from_ref(&path)).unwrap_err().to_string();
+        assert!(msg.contains("line 2: uid 'x\\ny' already at") && !msg.contains('\n'), "{msg:?}");
+        // A complete line that is not an annotation.
+        std::fs::write(&path, "{\"uid\":\"a\",\"d_sat\":\"many\"}\n").unwrap();
+        let msg = read_annotations(std::slice::from_ref(&path)).unwrap_err().to_string();
+        assert!(msg.contains("line 1: not an annotation") && !msg.contains('\n'), "{msg:?}");
+    }
 }

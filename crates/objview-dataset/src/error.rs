@@ -18,19 +18,33 @@ pub enum DatasetError {
     #[error("{path}: not a mesh file ({expected}), a folder or a split file (.json)")]
     UnsupportedInput { path: PathBuf, expected: &'static str },
     /// A split file is not a JSON array of objects with the required fields.
-    #[error("{path}: {reason}")]
+    #[error("{}: {}", .path.display(), one_line(.reason))]
     SplitFile { path: PathBuf, reason: String },
     /// Two inputs resolve to the same object id.
-    #[error("duplicate object id '{uid}': {first} and {second}")]
+    #[error(
+        "duplicate object id '{}': {} and {}",
+        one_line(.uid),
+        one_line(&.first.display().to_string()),
+        one_line(&.second.display().to_string())
+    )]
     DuplicateUid { uid: String, first: PathBuf, second: PathBuf },
     /// A `--shard I/N` argument is malformed.
     #[error("invalid shard '{0}': expected I/N with 0 <= I < N (e.g. 0/4)")]
     Shard(String),
     /// A complete line of a results file is not a JSON object with the key field.
-    #[error("{path}: line {line}: {reason} (the file is not a results file of this command, or was edited)")]
+    #[error(
+        "{}: line {line}: {} (the file is not a results file of this command, or was edited)",
+        .path.display(),
+        one_line(.reason)
+    )]
     CorruptLine { path: PathBuf, line: usize, reason: String },
     /// `--gt-cloud-dir` has no cloud for this object.
-    #[error("no ground-truth cloud for '{uid}' in {dir} (looked for {uid}.pcd, .ply, .npy, .npz)")]
+    #[error(
+        "no ground-truth cloud for '{}' in {} (looked for {}.pcd, .ply, .npy, .npz)",
+        one_line(.uid),
+        .dir.display(),
+        one_line(.uid)
+    )]
     MissingGtCloud { uid: String, dir: PathBuf },
     /// A setting is out of range.
     #[error("invalid setting {name}: {reason}")]
@@ -47,6 +61,15 @@ pub enum DatasetError {
     /// Saturation fit or cover.
     #[error("{path}: {source}")]
     Difficulty { path: PathBuf, source: objview_difficulty::DifficultyError },
+}
+
+/// `s` with its control characters (newline, tab, escape, …) written as escapes (`\n`,
+/// `\u{1b}`), so that a message naming an object id or a path read from a file stays on one line.
+pub fn one_line(s: &str) -> String {
+    if !s.chars().any(char::is_control) {
+        return s.to_string();
+    }
+    s.chars().map(|c| if c.is_control() { c.escape_default().to_string() } else { c.to_string() }).collect()
 }
 
 impl DatasetError {

@@ -121,6 +121,14 @@ pub fn read_split(path: &Path) -> Result<Vec<ObjectRef>, DatasetError> {
             for name in names {
                 match map.get(*name) {
                     None | Some(Value::Null) => continue,
+                    // Ids and paths with control characters (a newline in a file name) are
+                    // corrupt input; they would also break one-line messages and outputs.
+                    Some(Value::String(s)) if s.chars().any(char::is_control) => {
+                        return Err(bad(format!(
+                            "[{i}].{name}: contains a control character ('{}')",
+                            crate::error::one_line(s)
+                        )))
+                    }
                     Some(Value::String(s)) if !s.is_empty() => return Ok(Some(s.clone())),
                     Some(other) => {
                         return Err(bad(format!(
@@ -263,11 +271,15 @@ mod tests {
             (r#"[{"uid":"a"}]"#, "[0]: missing field 'mesh'"),
             (r#"[{"mesh":5}]"#, "[0].mesh: expected a non-empty string, got a number"),
             (r#"[{"mesh":"a.obj","annotation":[]}]"#, "[0].annotation: expected an object"),
+            (r#"[{"mesh":"a\n.obj"}]"#, "[0].mesh: contains a control character ('a\\n.obj')"),
+            (r#"[{"mesh":"a.obj","uid":"x\ty"}]"#, "[0].uid: contains a control character ('x\\ty')"),
+            (r#"[{"mesh":"a.obj","gt_cloud":"\u001b[31m"}]"#, "[0].gt_cloud: contains a control character"),
             ("[", "invalid JSON"),
         ] {
             std::fs::write(&split, text).unwrap();
             let msg = resolve_inputs(std::slice::from_ref(&split)).unwrap_err().to_string();
             assert!(msg.contains("bad.json") && msg.contains(needle), "{text}: {msg}");
+            assert!(!msg.contains('\n'), "one line: {msg:?}");
         }
     }
 
@@ -279,6 +291,12 @@ mod tests {
         touch(&b);
         let msg = resolve_inputs(&[a.clone(), b.clone()]).unwrap_err().to_string();
         assert!(msg.contains("duplicate object id 'a'"), "{msg}");
+        // Ids and paths from a folder walk may hold a newline: the message stays one line.
+        let (c, d) = (dir.path().join("p/new\nline.obj"), dir.path().join("q/new\nline.ply"));
+        touch(&c);
+        touch(&d);
+        let msg = resolve_inputs(&[c, d]).unwrap_err().to_string();
+        assert!(msg.contains("duplicate object id 'new\\nline'") && !msg.contains('\n'), "{msg:?}");
         let missing = dir.path().join("nope.obj");
         assert!(resolve_inputs(&[missing]).unwrap_err().to_string().contains("nope.obj"));
         let txt = dir.path().join("t.txt");

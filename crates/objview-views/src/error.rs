@@ -6,6 +6,15 @@
 
 use std::path::PathBuf;
 
+/// `s` with its control characters (newline, tab, escape, …) written as escapes (`\n`,
+/// `\u{1b}`): a JSON key or a line read from a file must not break the one-line message.
+pub fn one_line(s: &str) -> String {
+    if !s.chars().any(char::is_control) {
+        return s.to_string();
+    }
+    s.chars().map(|c| if c.is_control() { c.escape_default().to_string() } else { c.to_string() }).collect()
+}
+
 /// Errors of `objview-views`.
 #[derive(Debug, thiserror::Error)]
 pub enum ViewsError {
@@ -21,7 +30,7 @@ pub enum ViewsError {
         source: std::io::Error,
     },
     /// A bad line in a view-set file.
-    #[error("{path} line {line}: {reason}")]
+    #[error("{} line {line}: {}", one_line(.path), one_line(.reason))]
     ViewSetLine {
         /// The file (or `builtin:tammes-N`).
         path: String,
@@ -45,7 +54,7 @@ pub enum ViewsError {
         shipped: String,
     },
     /// A rule file that is not valid JSON.
-    #[error("{path}: invalid JSON: {reason}")]
+    #[error("{}: invalid JSON: {}", one_line(.path), one_line(.reason))]
     RuleJson {
         /// The file (or `builtin:NAME`).
         path: String,
@@ -53,7 +62,7 @@ pub enum ViewsError {
         reason: String,
     },
     /// A rule file that is valid JSON but not a valid rule set.
-    #[error("{path}: {json_path}: {reason}")]
+    #[error("{}: {}: {}", one_line(.path), one_line(.json_path), one_line(.reason))]
     Rule {
         /// The file (or `builtin:NAME`).
         path: String,

@@ -247,6 +247,11 @@ fn malformed_rule_files_name_file_and_json_path() {
         assert!(msg.starts_with(&format!("custom.json: {json_path}: ")), "{msg}");
         assert!(!msg.contains('\n'));
     }
+    // A key with a control character: the JSON path keeps it, the message stays one line.
+    let e = space(r#"{"name\n": "x"}"#).unwrap_err();
+    assert!(matches!(&e, ViewsError::Rule { json_path, .. } if json_path == "name\n"), "{e:?}");
+    assert_eq!(e.to_string().lines().count(), 1, "{e}");
+    assert!(e.to_string().starts_with("custom.json: name\\n: unknown field"), "{e}");
     // Invalid JSON and numbers that overflow to infinity are rejected by the JSON reader, with
     // the file, line and column.
     for json in [r#"{"atol": 1e-4,"#, r#"{"atol": 1e999}"#] {

@@ -18,6 +18,7 @@
 //!   with [`read_regular`] adds the type and size checks.
 
 use crate::limits::{over, Which};
+use crate::Limits;
 use crate::GeomError;
 use std::fs::{File, Metadata};
 use std::io::{Error, ErrorKind, Read};
@@ -136,6 +137,21 @@ pub fn read_regular(path: &Path, max_bytes: u64) -> Result<Vec<u8>, GeomError> {
     read_limited(path, max_bytes, None)
 }
 
+/// Reads a whole text file given by a user (a split file, view set, rule file, results or
+/// annotation lines) with the same checks as the loaders: a regular file (a top-level symlink
+/// is followed; a FIFO or device is refused instead of blocking or reading forever) of at most
+/// the process-wide `OBJVIEW_MAX_FILE_BYTES`, valid UTF-8. A drop-in replacement for
+/// `std::fs::read_to_string`: the error is an I/O error *without* the path, for the caller's
+/// own error type to name it.
+pub fn read_text(path: &Path) -> std::io::Result<String> {
+    let max = Limits::global().map_err(|e| Error::new(ErrorKind::InvalidInput, e))?.max_file_bytes;
+    let bytes = read_limited(path, max, Some(Which::FileBytes)).map_err(|e| match e {
+        GeomError::Io { source, .. } => source,
+        other => Error::new(ErrorKind::InvalidData, other.to_string()),
+    })?;
+    String::from_utf8(bytes).map_err(|_| Error::new(ErrorKind::InvalidData, "stream did not contain valid UTF-8"))
+}
+
 /// Decodes the `%XX` escapes of a URI (invalid escapes are kept as they are).
 pub fn percent_decode(s: &str) -> Vec<u8> {
     let hex = |c: u8| (c as char).to_digit(16).map(|d| d as u8);
@@ -199,6 +215,22 @@ pub fn resolve_inside(asset_path: &Path, reference: &str) -> Result<PathBuf, Geo
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn read_text_refuses_fifos_and_devices_and_reads_regular_files() {
+        use crate::test_support::{mkfifo, symlink, within, write};
+        let dir = tempfile::tempdir().unwrap();
+        let ok = write(dir.path(), "split.json", b"[]\n");
+        assert_eq!(read_text(&ok).unwrap(), "[]\n");
+        let fifo = mkfifo(&dir.path().join("pipe.json"));
+        let e = within(10, move || read_text(&fifo).unwrap_err().to_string());
+        assert!(e.contains("FIFO") && !e.contains("pipe.json"), "{e}");
+        let zero = symlink(Path::new("/dev/zero"), &dir.path().join("zero.jsonl"));
+        let e = within(10, move || read_text(&zero).unwrap_err().to_string());
+        assert!(e.contains("character device"), "{e}");
+        let bad = write(dir.path(), "latin1.txt", &[0x66, 0xe9, 0x0a]);
+        assert!(read_text(&bad).unwrap_err().to_string().contains("UTF-8"));
+    }
 
     #[test]
     fn percent_decoding_keeps_invalid_escapes() {

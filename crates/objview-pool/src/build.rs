@@ -546,7 +546,7 @@ fn settings_difference(old: &Value, new: &Value) -> Option<String> {
 
 /// Reads every complete line of a build log.
 pub fn read_build_log(path: &Path) -> Result<Vec<BuildRecord>, PoolError> {
-    let text = std::fs::read_to_string(path).map_err(|e| PoolError::io(path, e))?;
+    let text = objview_geom::fsutil::read_text(path).map_err(|e| PoolError::io(path, e))?;
     let mut out = Vec::new();
     for (i, line) in text.lines().enumerate() {
         if line.trim().is_empty() {
@@ -580,7 +580,7 @@ pub fn open_build_log(
     let path = pool_dir.join(BUILD_LOG);
     if path.is_file() {
         // Checked before opening, which would already drop retried lines.
-        let text = std::fs::read_to_string(&path).map_err(|e| PoolError::io(&path, e))?;
+        let text = objview_geom::fsutil::read_text(&path).map_err(|e| PoolError::io(&path, e))?;
         for (i, line) in text.lines().enumerate() {
             let Ok(v) = serde_json::from_str::<Value>(line) else { continue };
             if let Some(diff) = v.get("settings").and_then(|s| settings_difference(s, settings_json)) {

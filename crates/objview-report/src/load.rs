@@ -189,7 +189,7 @@ pub fn load_results(paths: &[PathBuf], tau: &str) -> Result<Loaded, ReportError>
     let mut failures = Vec::new();
     let mut skipped = Vec::new();
     for (file, path) in paths.iter().enumerate() {
-        let text = std::fs::read_to_string(path).map_err(|e| ReportError::io(path, e))?;
+        let text = objview_geom::fsutil::read_text(path).map_err(|e| ReportError::io(path, e))?;
         let mut info = InputFile {
             path: path.clone(),
             lines: 0,

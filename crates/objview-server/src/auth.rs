@@ -46,7 +46,7 @@ impl Tokens {
 
     /// Reads a tokens file.
     pub fn load(path: &Path) -> Result<Tokens, ServerError> {
-        let text = std::fs::read_to_string(path)
+        let text = objview_geom::fsutil::read_text(path)
             .map_err(|e| ServerError::Tokens { path: path.display().to_string(), reason: e.to_string() })?;
         Tokens::parse(&text, &path.display().to_string())
     }

@@ -434,7 +434,7 @@ pub fn read_annotations(paths: &[PathBuf]) -> Result<AnnotationSet, DatasetError
     let mut set = AnnotationSet::default();
     let mut seen = std::collections::HashMap::<String, (PathBuf, usize)>::new();
     for path in paths {
-        let text = std::fs::read_to_string(path).map_err(|e| DatasetError::io(path, e))?;
+        let text = objview_geom::fsutil::read_text(path).map_err(|e| DatasetError::io(path, e))?;
         let complete =
             if text.ends_with('\n') { text.as_str() } else { &text[..text.rfind('\n').map_or(0, |i| i + 1)] };
         for (i, line) in complete.lines().enumerate() {

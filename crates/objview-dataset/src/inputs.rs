@@ -105,7 +105,7 @@ fn walk(dir: &Path, files: &mut Vec<PathBuf>) -> Result<(), DatasetError> {
 /// `mesh` (or the paper's `obj_path`), optional `gt_cloud` (or `pcd_path`) and optional
 /// `annotation`. Relative paths are relative to the split file's folder.
 pub fn read_split(path: &Path) -> Result<Vec<ObjectRef>, DatasetError> {
-    let text = std::fs::read_to_string(path).map_err(|e| DatasetError::io(path, e))?;
+    let text = objview_geom::fsutil::read_text(path).map_err(|e| DatasetError::io(path, e))?;
     let bad = |reason: String| DatasetError::SplitFile { path: path.to_path_buf(), reason };
     let value: Value = serde_json::from_str(&text).map_err(|e| bad(format!("invalid JSON: {e}")))?;
     let Value::Array(items) = value else {
@@ -224,6 +224,26 @@ mod tests {
     fn touch(p: &Path) {
         std::fs::create_dir_all(p.parent().unwrap()).unwrap();
         std::fs::write(p, b"x").unwrap();
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_fifo_or_device_given_as_split_file_is_an_error_not_a_hang() {
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("pool.json");
+        assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+        let zero = dir.path().join("zero.json");
+        std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let _ = tx.send((
+                read_split(&fifo).unwrap_err().to_string(),
+                read_split(&zero).unwrap_err().to_string(),
+            ));
+        });
+        let (a, b) = rx.recv_timeout(std::time::Duration::from_secs(20)).expect("reading a FIFO hung");
+        assert!(a.contains("pool.json") && a.contains("FIFO"), "{a}");
+        assert!(b.contains("zero.json") && b.contains("character device"), "{b}");
     }
 
     #[test]

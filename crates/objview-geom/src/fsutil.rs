@@ -18,8 +18,8 @@
 //!   with [`read_regular`] adds the type and size checks.
 
 use crate::limits::{over, Which};
-use crate::Limits;
 use crate::GeomError;
+use crate::Limits;
 use std::fs::{File, Metadata};
 use std::io::{Error, ErrorKind, Read};
 use std::path::{Component, Path, PathBuf};
@@ -149,7 +149,8 @@ pub fn read_text(path: &Path) -> std::io::Result<String> {
         GeomError::Io { source, .. } => source,
         other => Error::new(ErrorKind::InvalidData, other.to_string()),
     })?;
-    String::from_utf8(bytes).map_err(|_| Error::new(ErrorKind::InvalidData, "stream did not contain valid UTF-8"))
+    String::from_utf8(bytes)
+        .map_err(|_| Error::new(ErrorKind::InvalidData, "stream did not contain valid UTF-8"))
 }
 
 /// Decodes the `%XX` escapes of a URI (invalid escapes are kept as they are).

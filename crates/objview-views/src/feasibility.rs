@@ -505,7 +505,7 @@ impl ViewSpace {
 
     /// Loads a rule file.
     pub fn load(path: &Path) -> Result<ViewSpace, ViewsError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ViewsError::Io {
+        let text = objview_geom::fsutil::read_text(path).map_err(|source| ViewsError::Io {
             path: path.to_path_buf(),
             op: "read",
             source,

@@ -126,7 +126,7 @@ impl ViewSet {
 
     /// Loads a view-set file.
     pub fn load(path: &Path) -> Result<ViewSet, ViewsError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ViewsError::Io {
+        let text = objview_geom::fsutil::read_text(path).map_err(|source| ViewsError::Io {
             path: path.to_path_buf(),
             op: "read",
             source,

@@ -66,8 +66,14 @@ fn read_points(path: &Path, n: usize) -> Option<Vec<[f64; 3]>> {
     )
 }
 
+/// Writes `bytes` to `path` through a temporary file and a rename. The temporary name is unique
+/// per write (process id and a per-process counter): two threads that build the same reference
+/// at once (parallel episodes or tests on one object) each rename their own complete file, and
+/// the last rename wins with identical content.
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), EpisodeError> {
-    let tmp = path.with_extension(format!("tmp{}", std::process::id()));
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let tmp = path.with_extension(format!("tmp{}-{n}", std::process::id()));
     std::fs::write(&tmp, bytes).map_err(|e| EpisodeError::Io(tmp.display().to_string(), e.to_string()))?;
     std::fs::rename(&tmp, path).map_err(|e| EpisodeError::Io(path.display().to_string(), e.to_string()))
 }
@@ -225,5 +231,32 @@ impl Reference {
         self.info.points = self.points.len();
         self.info.views = self.poses.len();
         self
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn concurrent_atomic_writes_of_one_file_all_succeed() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("reference-x.bin");
+        let handles: Vec<_> = (0..8u8)
+            .map(|_| {
+                let path = path.clone();
+                std::thread::spawn(move || {
+                    for _ in 0..50 {
+                        write_atomic(&path, &[7u8; 4096]).unwrap();
+                    }
+                })
+            })
+            .collect();
+        for h in handles {
+            h.join().unwrap();
+        }
+        assert_eq!(std::fs::read(&path).unwrap(), vec![7u8; 4096]);
+        let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(left.len(), 1, "temporary files left behind: {left:?}");
     }
 }

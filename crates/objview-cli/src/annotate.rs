@@ -106,7 +106,7 @@ pub fn run(a: Args) -> Result<()> {
     anyhow::ensure!(threads >= 1, "--threads must be at least 1");
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("thread pool")?;
     let terminal = std::io::stderr().is_terminal();
-    let bar = crate::demo::progress(todo as u64);
+    let bar = crate::common::progress(todo as u64);
     let done = AtomicUsize::new(0);
     let t = Instant::now();
 

@@ -160,7 +160,7 @@ pub fn bench_stability(a: StabilityArgs) -> Result<()> {
         a.seeds.len(),
         jobs.len()
     );
-    let bar = crate::demo::progress(jobs.len() as u64);
+    let bar = crate::common::progress(jobs.len() as u64);
     let results: Vec<Result<Annotation, String>> = pool.install(|| {
         jobs.par_iter()
             .map(|&(i, seed)| {

@@ -16,7 +16,6 @@
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use indicatif::{ProgressBar, ProgressStyle};
 use objview_geom::normalize::{load_normalized, Normalization};
 use objview_geom::pose::VIEW_RADIUS;
 use objview_render::{Camera, Intrinsics};
@@ -24,7 +23,6 @@ use objview_views::{start_pose, ViewSet};
 use objview_voxel::{Visibility, VisibilityMode, VoxelSet, DEFAULT_RESOLUTION};
 use rayon::prelude::*;
 use serde_json::json;
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -84,7 +82,7 @@ pub fn run(a: Args) -> Result<()> {
     let cameras: Vec<Camera> =
         views.poses(VIEW_RADIUS).into_iter().map(|p| Camera::new(p, Intrinsics::default())).collect();
 
-    let bar = progress(paths.len() as u64);
+    let bar = crate::common::progress(paths.len() as u64);
     let rows: Vec<Result<Row, (PathBuf, anyhow::Error)>> = paths
         .par_iter()
         .map(|p| {
@@ -324,18 +322,4 @@ fn one_object(path: &Path, renders: &Path, cameras: &[Camera]) -> Result<Row> {
         start_hits: frame.num_hits(),
         seconds: t.elapsed().as_secs_f64(),
     })
-}
-
-/// A progress bar with ETA on a terminal; hidden otherwise (the summary lines still print).
-pub fn progress(n: u64) -> ProgressBar {
-    if std::io::stderr().is_terminal() {
-        let b = ProgressBar::new(n);
-        b.set_style(
-            ProgressStyle::with_template("{bar:40} {pos}/{len} objects, {elapsed} elapsed, ETA {eta}")
-                .expect("valid template"),
-        );
-        b
-    } else {
-        ProgressBar::hidden()
-    }
 }

@@ -91,7 +91,7 @@ pub fn run(a: Args) -> Result<()> {
 
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("thread pool")?;
     let terminal = std::io::stderr().is_terminal();
-    let bar = crate::demo::progress(todo as u64);
+    let bar = crate::common::progress(todo as u64);
     let done = AtomicUsize::new(0);
     let t = Instant::now();
     let progress = |obj: &ObjectRef, outcome: &ItemOutcome| {

@@ -372,7 +372,7 @@ fn batch(
     let threads = a.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     anyhow::ensure!(threads >= 1, "--threads must be at least 1");
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("thread pool")?;
-    let bar = if a.quiet { indicatif::ProgressBar::hidden() } else { crate::demo::progress(todo as u64) };
+    let bar = if a.quiet { indicatif::ProgressBar::hidden() } else { crate::common::progress(todo as u64) };
     let terminal = std::io::stderr().is_terminal();
     let done = AtomicUsize::new(0);
     let work = |obj: &ObjectRef| match work(obj) {

@@ -457,8 +457,10 @@ impl Episode {
             self.end(TerminalSource::Exception, "interrupted", "the episode was not finished");
         }
         let last = self.steps.last().expect("the start view is always taken");
-        self.checkpoints
-            .insert("terminal".into(), Checkpoint { step: last.step, metrics: last.metrics.clone() });
+        self.checkpoints.insert(
+            crate::result::TERMINAL_CHECKPOINT.into(),
+            Checkpoint { step: last.step, metrics: last.metrics.clone() },
+        );
         let t = self.terminal.clone().unwrap_or(Terminal {
             source: TerminalSource::Exception,
             reason: "interrupted".into(),

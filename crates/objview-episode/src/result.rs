@@ -7,6 +7,9 @@
 
 use std::collections::BTreeMap;
 
+/// The key of the checkpoint every episode has: the metrics after its last view.
+pub const TERMINAL_CHECKPOINT: &str = "terminal";
+
 use serde::{Deserialize, Serialize};
 
 /// Metrics after one view (also the payload of a checkpoint).

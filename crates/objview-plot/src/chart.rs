@@ -21,6 +21,8 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 use serde::Serialize;
 
 use crate::png_text::PngBackend;
+/// The axis scale lives with the tick rules that depend on it.
+pub use crate::ticks::Scale;
 use crate::{font, ticks, PlotError};
 
 /// An opaque colour.
@@ -57,15 +59,6 @@ pub const INK: Rgb = Rgb(0, 0, 0);
 /// The `i`-th palette colour (cycling).
 pub fn palette(i: usize) -> Rgb {
     PALETTE[i % PALETTE.len()]
-}
-
-/// Axis scale.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Scale {
-    Linear,
-    /// Base-10 logarithmic; non-positive values are drawn at the axis minimum.
-    Log,
 }
 
 /// One axis: its label (name and unit), scale, optional fixed range and optional fixed ticks.

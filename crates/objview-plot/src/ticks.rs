@@ -3,7 +3,16 @@
 //! log axes get 1-2-5 multiples of powers of ten (thinned to whole decades when the range is
 //! wide), and labels are the shortest decimal that tells neighbouring ticks apart.
 
-use crate::chart::Scale;
+use serde::Serialize;
+
+/// Axis scale.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Scale {
+    Linear,
+    /// Base-10 logarithmic; non-positive values are drawn at the axis minimum.
+    Log,
+}
 
 /// The target number of ticks on an axis.
 const TARGET_TICKS: f64 = 6.0;

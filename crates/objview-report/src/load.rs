@@ -357,7 +357,7 @@ fn check(result: EpisodeResult, source: Source, tau: &str) -> Result<Episode, St
     if result.uid.is_empty() || result.method.is_empty() || result.view_space.is_empty() {
         return Err("empty uid, method or view_space".into());
     }
-    if !result.checkpoints.contains_key(crate::select::TERMINAL) {
+    if !result.checkpoints.contains_key(objview_episode::result::TERMINAL_CHECKPOINT) {
         return Err("no `terminal` checkpoint".into());
     }
     let has = |m: &objview_episode::result::Metrics| m.nsc.contains_key(tau) && m.sc.contains_key(tau);
@@ -398,7 +398,7 @@ fn contradicting_methods<'a>(files: &[InputFile], episodes: &'a [Episode]) -> Ve
 }
 
 fn terminal_views(e: &Episode) -> usize {
-    e.result.checkpoints.get(crate::select::TERMINAL).map_or(0, |c| c.metrics.views)
+    e.result.checkpoints.get(objview_episode::result::TERMINAL_CHECKPOINT).map_or(0, |c| c.metrics.views)
 }
 
 fn duplicate(kind: DuplicateKind, kept: &Episode, dropped: &Episode) -> Duplicate {

@@ -19,8 +19,8 @@ use serde::{Serialize, Serializer};
 
 use crate::load::Episode;
 
-/// Name of the checkpoint every episode has.
-pub const TERMINAL: &str = "terminal";
+/// Name of the checkpoint every episode has (defined with the result format).
+pub use objview_episode::result::TERMINAL_CHECKPOINT as TERMINAL;
 
 /// The budget settings always reported (paper §5.2).
 pub const DEFAULT_SETTINGS: [Setting; 3] = [Setting::Fixed(5), Setting::Fixed(30), Setting::Automatic];

@@ -3,15 +3,11 @@
 //! <token>`, and episodes belong to the token that created them. Owners are stored as a hash of
 //! the token, never the token itself.
 
+use axum::http::request::Parts;
 use std::collections::HashMap;
 use std::path::Path;
-use std::sync::Arc;
-
-use axum::extract::FromRequestParts;
-use axum::http::request::Parts;
 
 use crate::error::{ApiError, ServerError};
-use crate::state::AppState;
 
 /// The accepted tokens and their names.
 #[derive(Debug, Clone, Default)]
@@ -81,11 +77,13 @@ pub struct Caller {
     pub owner: String,
 }
 
-impl FromRequestParts<Arc<AppState>> for Caller {
-    type Rejection = ApiError;
-
-    async fn from_request_parts(parts: &mut Parts, state: &Arc<AppState>) -> Result<Caller, ApiError> {
-        let Some(tokens) = &state.tokens else {
+impl Caller {
+    /// The caller of a request with headers `parts` on a server accepting `tokens` (none: every
+    /// caller is anonymous). Fails with 401 `unauthorized` when the server has tokens and the
+    /// request has no known one. The request extractor (`FromRequestParts`) is implemented
+    /// where the server state lives (`state.rs`) and calls this.
+    pub fn from_parts(parts: &Parts, tokens: Option<&Tokens>) -> Result<Caller, ApiError> {
+        let Some(tokens) = tokens else {
             return Ok(Caller { owner: String::new() });
         };
         let header = parts

@@ -22,7 +22,7 @@ use objview_views::{ViewSet, ViewSpace};
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
-use crate::auth::Tokens;
+use crate::auth::{Caller, Tokens};
 use crate::db::{ActionRow, Db, EpisodeRow};
 use crate::error::{ApiError, ServerError};
 use crate::pool::{ObjectKey, Pool, SceneCache, CANDIDATE_SETS, VIEW_SPACES};
@@ -908,6 +908,19 @@ impl AppState {
                 eprintln!("objview serve: ending episode {} at its time limit: {e}", slot.id);
             }
         }
+    }
+}
+
+/// Who is calling, from the request's bearer token and this server's tokens
+/// ([`Caller::from_parts`]).
+impl axum::extract::FromRequestParts<Arc<AppState>> for Caller {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(
+        parts: &mut axum::http::request::Parts,
+        state: &Arc<AppState>,
+    ) -> Result<Caller, ApiError> {
+        Caller::from_parts(parts, state.tokens.as_ref())
     }
 }
 

@@ -63,14 +63,9 @@ pub enum DatasetError {
     Difficulty { path: PathBuf, source: objview_difficulty::DifficultyError },
 }
 
-/// `s` with its control characters (newline, tab, escape, …) written as escapes (`\n`,
-/// `\u{1b}`), so that a message naming an object id or a path read from a file stays on one line.
-pub fn one_line(s: &str) -> String {
-    if !s.chars().any(char::is_control) {
-        return s.to_string();
-    }
-    s.chars().map(|c| if c.is_control() { c.escape_default().to_string() } else { c.to_string() }).collect()
-}
+/// Control characters (a newline in a JSON key, an id or a path read from a file) are shown
+/// escaped so that every message stays on one line: the geometry layer's helper.
+pub use objview_geom::error::one_line;
 
 impl DatasetError {
     /// Shorthand for [`DatasetError::Io`].

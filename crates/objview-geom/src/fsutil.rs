@@ -65,16 +65,21 @@ fn check(path: &Path, meta: &Metadata, max_bytes: u64, which: Option<Which>) -> 
     }
     let len = meta.len();
     if len > max_bytes {
-        let tail = match which {
-            Some(w) => over(w, max_bytes),
-            None => format!("over the limit of {max_bytes} bytes"),
-        };
+        let tail = limit_tail(max_bytes, which);
         return Err(GeomError::io(
             path,
             Error::new(ErrorKind::InvalidInput, format!("file of {len} bytes is {tail}")),
         ));
     }
     Ok(len)
+}
+
+/// "over the limit of …": naming the limit's environment variable when `which` is given.
+fn limit_tail(max_bytes: u64, which: Option<Which>) -> String {
+    match which {
+        Some(w) => over(w, max_bytes),
+        None => format!("over the limit of {max_bytes} bytes"),
+    }
 }
 
 /// Opens `path` for reading without blocking on FIFOs and without acquiring a controlling
@@ -119,10 +124,7 @@ pub(crate) fn read_limited(path: &Path, max_bytes: u64, which: Option<Which>) ->
     let mut bytes = Vec::with_capacity(len as usize);
     file.take(max_bytes.saturating_add(1)).read_to_end(&mut bytes).map_err(|e| GeomError::io(path, e))?;
     if bytes.len() as u64 > max_bytes {
-        let tail = match which {
-            Some(w) => over(w, max_bytes),
-            None => format!("over the limit of {max_bytes} bytes"),
-        };
+        let tail = limit_tail(max_bytes, which);
         return Err(GeomError::io(
             path,
             Error::new(ErrorKind::InvalidInput, format!("file grew while read: {tail}")),

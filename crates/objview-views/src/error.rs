@@ -6,14 +6,9 @@
 
 use std::path::PathBuf;
 
-/// `s` with its control characters (newline, tab, escape, …) written as escapes (`\n`,
-/// `\u{1b}`): a JSON key or a line read from a file must not break the one-line message.
-pub fn one_line(s: &str) -> String {
-    if !s.chars().any(char::is_control) {
-        return s.to_string();
-    }
-    s.chars().map(|c| if c.is_control() { c.escape_default().to_string() } else { c.to_string() }).collect()
-}
+/// Control characters (a newline in a JSON key, an id or a path read from a file) are shown
+/// escaped so that every message stays on one line: the geometry layer's helper.
+pub use objview_geom::error::one_line;
 
 /// Errors of `objview-views`.
 #[derive(Debug, thiserror::Error)]

@@ -79,12 +79,9 @@ pub struct Episode {
 pub struct FailureLine {
     /// Where it was read.
     pub source: Source,
-    pub uid: String,
-    pub method: String,
-    pub view_space: String,
-    pub budget: String,
-    /// The seed, when the line has one.
-    pub seed: Option<u64>,
+    /// Which episode it was.
+    #[serde(flatten)]
+    pub keys: LineKeys,
     /// Why the episode could not run.
     pub error: String,
     /// An episode result with the same (uid, method, view space, budget, seed) exists (a retry
@@ -98,29 +95,53 @@ pub struct FailureLine {
 pub struct SkippedLine {
     /// Where it was read.
     pub source: Source,
-    pub uid: String,
-    pub method: String,
-    pub view_space: String,
-    pub budget: String,
-    /// The seed, when the line has one.
-    pub seed: Option<u64>,
+    /// Which episode it was about, as far as the line says.
+    #[serde(flatten)]
+    pub keys: LineKeys,
     /// Why it was skipped.
     pub reason: String,
 }
 
 impl SkippedLine {
     fn new(source: Source, value: Option<&Value>, reason: impl Into<String>) -> SkippedLine {
-        let f = value.filter(|v| v.is_object()).map(|v| failure_line(source, v));
-        let text = |g: fn(&FailureLine) -> &String| f.as_ref().map(|f| g(f).clone()).unwrap_or_default();
-        SkippedLine {
-            source,
-            uid: text(|f| &f.uid),
-            method: text(|f| &f.method),
-            view_space: text(|f| &f.view_space),
-            budget: text(|f| &f.budget),
-            seed: f.as_ref().and_then(|f| f.seed),
-            reason: reason.into(),
+        let keys = value.filter(|v| v.is_object()).map(line_keys).unwrap_or_default();
+        SkippedLine { source, keys, reason: reason.into() }
+    }
+}
+
+/// What a failure or skipped line says of its episode; empty (`None` for the seed) where the
+/// line does not say.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct LineKeys {
+    pub uid: String,
+    pub method: String,
+    pub view_space: String,
+    pub budget: String,
+    /// The seed, when the line has one.
+    pub seed: Option<u64>,
+}
+
+impl LineKeys {
+    /// The keys of an episode result.
+    pub fn of_result(r: &EpisodeResult) -> LineKeys {
+        LineKeys {
+            uid: r.uid.clone(),
+            method: r.method.clone(),
+            view_space: r.view_space.clone(),
+            budget: r.budget.clone(),
+            seed: Some(r.seed),
         }
+    }
+
+    /// uid, method, view space, budget and seed as table cells (an absent seed is empty).
+    pub fn cells(&self) -> [String; 5] {
+        [
+            self.uid.clone(),
+            self.method.clone(),
+            self.view_space.clone(),
+            self.budget.clone(),
+            self.seed.map(|s| s.to_string()).unwrap_or_default(),
+        ]
     }
 }
 
@@ -242,16 +263,7 @@ pub fn load_results(paths: &[PathBuf], tau: &str) -> Result<Loaded, ReportError>
         let file = &mut files[e.source.file];
         file.episodes -= 1;
         file.skipped += 1;
-        let r = &e.result;
-        skipped.push(SkippedLine {
-            source: e.source,
-            uid: r.uid.clone(),
-            method: r.method.clone(),
-            view_space: r.view_space.clone(),
-            budget: r.budget.clone(),
-            seed: Some(r.seed),
-            reason,
-        });
+        skipped.push(SkippedLine { source: e.source, keys: LineKeys::of_result(&e.result), reason });
     }
     raw.retain(|e| !contradicting.contains(&e.source));
     skipped.sort_by_key(|s| s.source);
@@ -265,12 +277,13 @@ pub fn load_results(paths: &[PathBuf], tau: &str) -> Result<Loaded, ReportError>
         })
         .collect();
     for f in &mut failures {
-        f.superseded = f.seed.is_some_and(|seed| {
+        let k = &f.keys;
+        f.superseded = k.seed.is_some_and(|seed| {
             results.contains(&(
-                f.uid.as_str(),
-                f.method.as_str(),
-                f.view_space.as_str(),
-                f.budget.as_str(),
+                k.uid.as_str(),
+                k.method.as_str(),
+                k.view_space.as_str(),
+                k.budget.as_str(),
                 seed,
             ))
         });
@@ -318,6 +331,16 @@ fn sort_key(e: &Episode) -> (&str, &str, &str, u64, &str, Source) {
 /// A failure line's fields: top-level keys, else the same keys in its `settings` object (where
 /// `objview run` records them; the method is its `planner` there).
 fn failure_line(source: Source, v: &Value) -> FailureLine {
+    let error = v.get("error").map_or_else(String::new, |e| match e {
+        Value::String(s) => s.clone(),
+        other => other.to_string(),
+    });
+    FailureLine { source, keys: line_keys(v), error, superseded: false }
+}
+
+/// The episode keys of a failure or skipped line: top-level keys, else the same keys in its
+/// `settings` object (where `objview run` records them; the method is its `planner` there).
+fn line_keys(v: &Value) -> LineKeys {
     let find = |keys: &[&str]| -> Option<&Value> {
         let settings = v.get("settings");
         keys.iter()
@@ -329,18 +352,12 @@ fn failure_line(source: Source, v: &Value) -> FailureLine {
         Some(Value::String(s)) => s.clone(),
         Some(other) => other.to_string(),
     };
-    FailureLine {
-        source,
+    LineKeys {
         uid: text(&["uid"]),
         method: text(&["method", "planner"]),
         view_space: text(&["view_space"]),
         budget: text(&["budget"]),
         seed: find(&["seed"]).and_then(Value::as_u64),
-        error: v.get("error").map_or_else(String::new, |e| match e {
-            Value::String(s) => s.clone(),
-            other => other.to_string(),
-        }),
-        superseded: false,
     }
 }
 

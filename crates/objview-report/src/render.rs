@@ -7,7 +7,7 @@ use crate::aggregate::{Aggregate, Stat};
 use crate::format::{
     csv, csv_decimals, csv_num, family_title, fixed, fixed_opt, markdown_table, plural, Align,
 };
-use crate::load::{FailureLine, InputFile, SkippedLine, Source};
+use crate::load::{FailureLine, InputFile, LineKeys, SkippedLine, Source};
 use crate::tables::{MsTable, RankedTable, ReachTable, TerminalTable};
 
 use Align::{Left, Right};
@@ -546,15 +546,7 @@ pub fn failures_markdown(failures: &[FailureLine], files: &[InputFile], limit: u
         .map(|f| {
             let error =
                 if f.superseded { format!("{} (superseded by a result)", f.error) } else { f.error.clone() };
-            vec![
-                locate(files, f.source),
-                f.uid.clone(),
-                f.method.clone(),
-                f.view_space.clone(),
-                f.budget.clone(),
-                f.seed.map(|s| s.to_string()).unwrap_or_default(),
-                error,
-            ]
+            std::iter::once(locate(files, f.source)).chain(f.keys.cells()).chain([error]).collect()
         })
         .collect();
     out.push_str(&markdown_table(&headers, &rows));
@@ -581,15 +573,7 @@ pub fn skipped_markdown(skipped: &[SkippedLine], files: &[InputFile], limit: usi
         .iter()
         .take(limit)
         .map(|s| {
-            vec![
-                locate(files, s.source),
-                s.uid.clone(),
-                s.method.clone(),
-                s.view_space.clone(),
-                s.budget.clone(),
-                s.seed.map(|x| x.to_string()).unwrap_or_default(),
-                s.reason.clone(),
-            ]
+            std::iter::once(locate(files, s.source)).chain(s.keys.cells()).chain([s.reason.clone()]).collect()
         })
         .collect();
     out.push_str(&markdown_table(&headers, &rows));
@@ -607,38 +591,20 @@ pub fn failures_csv(failures: &[FailureLine], skipped: &[SkippedLine], files: &[
             .iter()
             .map(|s| s.to_string())
             .collect();
-    let file = |s: Source| files.get(s.file).map(|i| i.path.display().to_string()).unwrap_or_default();
+    // kind, file, line, the episode keys, superseded, error.
+    let row = |kind: &str, source: Source, keys: &LineKeys, superseded: String, error: &str| -> Vec<String> {
+        let file = files.get(source.file).map(|i| i.path.display().to_string()).unwrap_or_default();
+        [kind.to_string(), file, source.line.to_string()]
+            .into_iter()
+            .chain(keys.cells())
+            .chain([superseded, error.to_string()])
+            .collect()
+    };
     let mut rows: Vec<Vec<String>> = failures
         .iter()
-        .map(|f| {
-            vec![
-                "failure".to_string(),
-                file(f.source),
-                f.source.line.to_string(),
-                f.uid.clone(),
-                f.method.clone(),
-                f.view_space.clone(),
-                f.budget.clone(),
-                f.seed.map(|s| s.to_string()).unwrap_or_default(),
-                f.superseded.to_string(),
-                f.error.clone(),
-            ]
-        })
+        .map(|f| row("failure", f.source, &f.keys, f.superseded.to_string(), &f.error))
         .collect();
-    rows.extend(skipped.iter().map(|s| {
-        vec![
-            "skipped_line".to_string(),
-            file(s.source),
-            s.source.line.to_string(),
-            s.uid.clone(),
-            s.method.clone(),
-            s.view_space.clone(),
-            s.budget.clone(),
-            s.seed.map(|x| x.to_string()).unwrap_or_default(),
-            String::new(),
-            s.reason.clone(),
-        ]
-    }));
+    rows.extend(skipped.iter().map(|s| row("skipped_line", s.source, &s.keys, String::new(), &s.reason)));
     csv(&headers, &rows)
 }
 

@@ -477,7 +477,7 @@ pub fn terminal_summary(episodes: &[Episode], failures: &[FailureLine]) -> Termi
         *r.reasons.entry(e.result.terminal_reason.clone()).or_default() += 1;
     }
     for f in failures.iter().filter(|f| !f.superseded) {
-        row(&mut rows, &f.view_space, &f.method).failures += 1;
+        row(&mut rows, &f.keys.view_space, &f.keys.method).failures += 1;
     }
     let present: BTreeSet<&str> = rows.values().flat_map(|r| r.reasons.keys().map(String::as_str)).collect();
     let mut reasons: Vec<String> =

@@ -150,7 +150,7 @@ fn inputs_are_counted_and_duplicates_keep_the_last_line() {
 fn failure_lines_are_counted_and_listed() {
     let r = report();
     assert_eq!(r.counts.failure_lines, 1);
-    assert_eq!(r.failures[0].uid, "o2");
+    assert_eq!(r.failures[0].keys.uid, "o2");
     assert_eq!(r.failures[0].error, "planner crashed");
     assert_eq!(r.failures[0].source.line, 2);
     assert!(!r.failures[0].superseded);
@@ -174,7 +174,10 @@ fn failure_lines_are_counted_and_listed() {
         .failures
         .iter()
         .map(|f| {
-            format!("{} {} {} {} {:?} {}", f.uid, f.method, f.view_space, f.budget, f.seed, f.superseded)
+            format!(
+                "{} {} {} {} {:?} {}",
+                f.keys.uid, f.keys.method, f.keys.view_space, f.keys.budget, f.keys.seed, f.superseded
+            )
         })
         .collect();
     assert_eq!(got, ["o1 alpha whole auto Some(0) true", "o7 alpha whole auto Some(0) false"]);
@@ -555,7 +558,7 @@ fn bad_lines_are_skipped_and_listed_with_their_line_and_reason() {
         "{reasons:?}"
     );
     assert!(reasons[0].ends_with("bad.jsonl:1"), "{reasons:?}");
-    assert_eq!((r.counts.episodes, r.skipped[0].uid.as_str()), (1, "o2"));
+    assert_eq!((r.counts.episodes, r.skipped[0].keys.uid.as_str()), (1, "o2"));
     // Settings and inputs are still errors.
     let e = build_report(&[], &[], &d).unwrap_err();
     assert!(matches!(e, ReportError::NoInputs));
@@ -582,7 +585,7 @@ fn a_result_with_a_null_number_is_skipped_and_the_rest_of_the_file_is_reported()
     );
     let s = &r.skipped[0];
     assert_eq!(
-        (s.uid.as_str(), s.method.as_str(), s.view_space.as_str(), s.seed),
+        (s.keys.uid.as_str(), s.keys.method.as_str(), s.keys.view_space.as_str(), s.keys.seed),
         ("o9", "alpha", "whole", Some(0))
     );
     assert_eq!((r.counts.episodes, r.counts.objects), (2, 2));

@@ -2,18 +2,18 @@
 //! per object (`objview_dataset::annotate`), resumable (`--out` is read first and finished
 //! objects are skipped) and shardable (`--shard I/N`).
 
-use std::io::IsTerminal;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Parser;
-use objview_dataset::annotate::{annotate_object, failure, AnnotateSettings, GridViews};
-use objview_dataset::{resolve_inputs, run_batch, to_line, ItemOutcome, ResumableJsonl, Shard};
+use objview_dataset::annotate::AnnotateSettings;
+use objview_dataset::Shard;
 use objview_difficulty::{CoverSettings, DEFAULT_TIME_LIMIT_S};
 use objview_geom::normalize::Normalization;
+use objview_runs::annotate::AnnotatePlan;
 use objview_voxel::{VisibilityMode, DEFAULT_RESOLUTION};
+
+use crate::common::TermProgress;
 
 #[derive(Parser)]
 pub struct Args {
@@ -62,90 +62,33 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let settings = AnnotateSettings {
-        normalize: a.normalize,
-        visibility: a.visibility,
-        resolution: a.resolution,
-        gt_seed: a.gt_seed,
-        gt_cloud_dir: a.gt_cloud_dir.clone(),
-        cover: CoverSettings {
-            time_limit_s: a.time_limit,
-            min_views_per_element: a.min_views,
-            method: a.cover_method,
+    let plan = AnnotatePlan {
+        inputs: a.inputs,
+        out: a.out.clone(),
+        settings: AnnotateSettings {
+            normalize: a.normalize,
+            visibility: a.visibility,
+            resolution: a.resolution,
+            gt_seed: a.gt_seed,
+            gt_cloud_dir: a.gt_cloud_dir,
+            cover: CoverSettings {
+                time_limit_s: a.time_limit,
+                min_views_per_element: a.min_views,
+                method: a.cover_method,
+                ..Default::default()
+            },
             ..Default::default()
         },
-        ..Default::default()
+        threads: a.threads,
+        shard: a.shard.unwrap_or(Shard::ALL),
+        retry_failed: a.retry_failed,
     };
-    settings.validate()?;
-    if let Some(dir) = &a.gt_cloud_dir {
-        anyhow::ensure!(dir.is_dir(), "{}: --gt-cloud-dir is not a folder", dir.display());
-    }
-    let shard = a.shard.unwrap_or(Shard::ALL);
-    let objects = shard.select(resolve_inputs(&a.inputs)?);
-    let views = GridViews::new(settings.view_radius)?;
-    let mut settings_json = crate::provenance::settings("annotate", settings.to_json());
-    settings_json["shard"] = serde_json::json!(shard.to_string());
-
-    let (out, existing) = ResumableJsonl::open(&a.out, "uid", a.retry_failed)?;
-    if existing.torn {
-        eprintln!(
-            "{}: cut off a torn last line (an interrupted write); that object is redone",
-            a.out.display()
-        );
-    }
-    let todo = objects.iter().filter(|o| !existing.done.contains(&o.uid)).count();
-    eprintln!(
-        "annotate: {} objects (shard {shard}), {} already in {}, {todo} to do; {} views per object",
-        objects.len(),
-        objects.len() - todo,
-        a.out.display(),
-        views.total_views()
-    );
-
-    let threads = a.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    anyhow::ensure!(threads >= 1, "--threads must be at least 1");
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("thread pool")?;
-    let terminal = std::io::stderr().is_terminal();
-    let bar = crate::common::progress(todo as u64);
-    let done = AtomicUsize::new(0);
-    let t = Instant::now();
-
-    let work =
-        |obj: &objview_dataset::ObjectRef| match annotate_object(obj, &settings, &views, &settings_json) {
-            Ok(ann) => ItemOutcome { line: to_line(&ann), failed: false },
-            Err(e) => ItemOutcome { line: to_line(&failure(obj, &e, &settings_json)), failed: true },
-        };
-    let progress = |obj: &objview_dataset::ObjectRef, outcome: &ItemOutcome| {
-        let i = done.fetch_add(1, Ordering::Relaxed) + 1;
-        bar.inc(1);
-        let v: serde_json::Value = serde_json::from_str(&outcome.line).unwrap_or_default();
-        let msg = if outcome.failed {
-            format!("[{i}/{todo}] {}: FAILED: {}", obj.uid, v["error"].as_str().unwrap_or("?"))
-        } else {
-            format!(
-                "[{i}/{todo}] {}: r_vis={:.3} d_sat={} d_plan={} ({}) {:.2} s",
-                obj.uid,
-                v["r_vis"].as_f64().unwrap_or(f64::NAN),
-                v["d_sat"],
-                v["d_plan"],
-                v["d_plan_status"].as_str().unwrap_or("?"),
-                v["seconds"].as_f64().unwrap_or(f64::NAN)
-            )
-        };
-        if terminal {
-            bar.println(msg);
-        } else {
-            eprintln!("{msg}");
-        }
-    };
-    let summary = pool.install(|| run_batch(&objects, out, &existing, work, progress))?;
-    bar.finish_and_clear();
+    let (s, seconds) = plan.run(&TermProgress::new(false))?;
     println!(
-        "annotate: {} done, {} failed, {} skipped (already in the file) in {:.1} s -> {}",
-        summary.processed - summary.failed,
-        summary.failed,
-        summary.skipped,
-        t.elapsed().as_secs_f64(),
+        "annotate: {} done, {} failed, {} skipped (already in the file) in {seconds:.1} s -> {}",
+        s.processed - s.failed,
+        s.failed,
+        s.skipped,
         a.out.display()
     );
     Ok(())

@@ -203,7 +203,7 @@ fn bench_render(a: RenderArgs) -> Result<()> {
     }
     if let Some(p) = &a.json {
         let v = json!({
-            "settings": crate::provenance::settings("bench render", json!({
+            "settings": objview_runs::provenance::settings("bench render", json!({
                 "object": a.object, "sizes": a.sizes, "poses": poses.len(), "repeats": a.repeats,
                 "threads": rayon::current_num_threads(),
             })),

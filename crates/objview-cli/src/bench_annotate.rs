@@ -59,7 +59,7 @@ fn stage_medians(runs: &[Annotation]) -> StageTimings {
 pub fn bench_annotate(a: AnnotateBenchArgs) -> Result<()> {
     let settings = AnnotateSettings::default();
     let views = GridViews::new(settings.view_radius)?;
-    let settings_json = crate::provenance::settings("bench annotate", settings.to_json());
+    let settings_json = objview_runs::provenance::settings("bench annotate", settings.to_json());
     let all = std::thread::available_parallelism().map_or(1, |n| n.get());
     let dir = tempfile::tempdir()?;
     let repeats = a.repeats.max(1);
@@ -165,7 +165,7 @@ pub fn bench_stability(a: StabilityArgs) -> Result<()> {
         jobs.par_iter()
             .map(|&(i, seed)| {
                 let s = AnnotateSettings { gt_seed: seed, ..base.clone() };
-                let sj = crate::provenance::settings("bench stability", s.to_json());
+                let sj = objview_runs::provenance::settings("bench stability", s.to_json());
                 let r = annotate_object(&objects[i], &s, &views, &sj).map_err(|e| e.to_string());
                 bar.inc(1);
                 r
@@ -230,7 +230,7 @@ pub fn bench_stability(a: StabilityArgs) -> Result<()> {
         dsat_spreads.iter().cloned().fold(0.0, f64::max)
     );
     if let Some(p) = &a.json {
-        let settings = crate::provenance::settings(
+        let settings = objview_runs::provenance::settings(
             "bench stability",
             json!({"seeds": a.seeds, "annotate": base.to_json()}),
         );

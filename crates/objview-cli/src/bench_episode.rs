@@ -158,7 +158,7 @@ pub fn bench_episode(a: EpisodeBenchArgs) -> Result<()> {
     }
     if let Some(path) = &a.json {
         let v = json!({
-            "settings": crate::provenance::settings("bench episode", json!({
+            "settings": objview_runs::provenance::settings("bench episode", json!({
                 "object": a.object, "triangles": mesh.num_triangles(), "gt_points": scene.gt.len(), "views": a.views,
                 "threads": rayon::current_num_threads(),
             })),

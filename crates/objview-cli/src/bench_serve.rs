@@ -116,7 +116,7 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
         let server_cfg = objview_server::ServerConfig {
             pool: vec![split],
             db: dir.path().join("bench.sqlite"),
-            cache_dir: Some(a.cache_dir.clone().unwrap_or_else(crate::run::default_cache_dir)),
+            cache_dir: Some(a.cache_dir.clone().unwrap_or_else(objview_runs::cache::default_reference_cache)),
             ..Default::default()
         };
         let server = objview_server::spawn(&server_cfg, "127.0.0.1:0")?;

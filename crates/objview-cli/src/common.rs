@@ -1,10 +1,13 @@
-//! Small pieces shared by several subcommands: JSON output, output folders and the progress bar.
+//! Small pieces shared by several subcommands: JSON output, output folders, the progress bar
+//! and the terminal [`Progress`] of batch commands.
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
+use objview_dataset::{BatchStart, ItemProgress, Progress};
 use serde_json::Value;
 use std::io::IsTerminal;
 use std::path::Path;
+use std::sync::Mutex;
 
 /// Writes pretty JSON with a trailing newline, creating parent folders.
 pub fn write_json(path: &Path, v: &Value) -> Result<()> {
@@ -33,5 +36,60 @@ pub fn progress(n: u64) -> ProgressBar {
         b
     } else {
         ProgressBar::hidden()
+    }
+}
+
+/// Batch progress on stderr: the start line, one line per finished item (above a progress bar
+/// on a terminal), and the torn-line notice. `quiet` keeps only the notice.
+pub struct TermProgress {
+    bar: Mutex<Option<ProgressBar>>,
+    quiet: bool,
+}
+
+impl TermProgress {
+    /// Progress that prints everything (`quiet`: only the torn-line notice).
+    pub fn new(quiet: bool) -> TermProgress {
+        TermProgress { bar: Mutex::new(None), quiet }
+    }
+
+    fn println(&self, msg: &str) {
+        let bar = self.bar.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        match bar.as_ref() {
+            Some(b) if std::io::stderr().is_terminal() => b.println(msg),
+            _ => eprintln!("{msg}"),
+        }
+    }
+}
+
+impl Progress for TermProgress {
+    fn torn(&self, out: &Path) {
+        eprintln!(
+            "{}: cut off a torn last line (an interrupted write); that object is redone",
+            out.display()
+        );
+    }
+
+    fn start(&self, s: &BatchStart) {
+        if self.quiet {
+            return;
+        }
+        eprintln!("{s}");
+        *self.bar.lock().unwrap_or_else(std::sync::PoisonError::into_inner) = Some(progress(s.todo as u64));
+    }
+
+    fn item(&self, item: &ItemProgress<'_>) {
+        if self.quiet {
+            return;
+        }
+        if let Some(b) = self.bar.lock().unwrap_or_else(std::sync::PoisonError::into_inner).as_ref() {
+            b.inc(1);
+        }
+        self.println(&item.to_string());
+    }
+
+    fn finish(&self) {
+        if let Some(b) = self.bar.lock().unwrap_or_else(std::sync::PoisonError::into_inner).take() {
+            b.finish_and_clear();
+        }
     }
 }

@@ -15,7 +15,6 @@ mod pool;
 mod pool_build;
 mod pool_plot;
 mod pool_split;
-mod provenance;
 mod render;
 mod report;
 mod run;

@@ -4,18 +4,16 @@
 //! of the pool). Resumable: `build.jsonl` in the pool folder is read first and finished objects
 //! are skipped.
 
-use std::io::IsTerminal;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args as ClapArgs;
-use objview_dataset::{resolve_inputs, ItemOutcome, ObjectRef};
+use objview_dataset::resolve_inputs;
 use objview_geom::normalize::Normalization;
 use objview_pool::build::{
-    finish_build, open_build_log, run_build, BuildSettings, BUILD_LOG, DEFAULT_MAX_FACES,
-    DEFAULT_MIN_EXTENT_RATIO, DEFAULT_MIN_FACES, DEFAULT_MIN_SURFACE_VOXELS, MANIFEST_FILE, POOL_FILE,
+    finish_build, open_build_log, run_build, BuildSettings, DEFAULT_MAX_FACES, DEFAULT_MIN_EXTENT_RATIO,
+    DEFAULT_MIN_FACES, DEFAULT_MIN_SURFACE_VOXELS, MANIFEST_FILE, POOL_FILE,
 };
 use objview_voxel::DEFAULT_RESOLUTION;
 
@@ -68,62 +66,20 @@ pub fn run(a: Args) -> Result<()> {
         gt_seed: a.gt_seed,
     };
     settings.validate()?;
-    let threads = a.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    anyhow::ensure!(threads >= 1, "--threads must be at least 1");
     let objects = resolve_inputs(&a.inputs)?;
-    let settings_json = crate::provenance::settings("pool build", settings.to_json());
-
+    let settings_json = objview_runs::provenance::settings("pool build", settings.to_json());
     let (out, existing) = open_build_log(&a.out, &settings_json, a.retry_failed)?;
-    let log = a.out.join(BUILD_LOG);
-    if existing.torn {
-        eprintln!(
-            "{}: cut off a torn last line (an interrupted write); that object is redone",
-            log.display()
-        );
-    }
-    let todo = objects.iter().filter(|o| !existing.done.contains(&o.uid)).count();
-    eprintln!(
-        "pool build: {} objects, {} already in {}, {todo} to do",
-        objects.len(),
-        objects.len() - todo,
-        log.display()
-    );
-
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("thread pool")?;
-    let terminal = std::io::stderr().is_terminal();
-    let bar = crate::common::progress(todo as u64);
-    let done = AtomicUsize::new(0);
     let t = Instant::now();
-    let progress = |obj: &ObjectRef, outcome: &ItemOutcome| {
-        let i = done.fetch_add(1, Ordering::Relaxed) + 1;
-        bar.inc(1);
-        let v: serde_json::Value = serde_json::from_str(&outcome.line).unwrap_or_default();
-        let msg = if outcome.failed {
-            format!(
-                "[{i}/{todo}] {}: rejected ({}): {}",
-                obj.uid,
-                v["reason"].as_str().unwrap_or("?"),
-                v["error"].as_str().unwrap_or("?")
-            )
-        } else {
-            let st = &v["stats"];
-            format!(
-                "[{i}/{todo}] {}: {} faces, area {:.3}, {} surface voxels",
-                obj.uid,
-                st["faces"],
-                st["surface_area"].as_f64().unwrap_or(f64::NAN),
-                st["surface_voxels"]
-            )
-        };
-        if terminal {
-            bar.println(msg);
-        } else {
-            eprintln!("{msg}");
-        }
-    };
-    let summary =
-        pool.install(|| run_build(&objects, &a.out, &settings, &settings_json, out, &existing, progress))?;
-    bar.finish_and_clear();
+    let summary = run_build(
+        &objects,
+        &a.out,
+        &settings,
+        &settings_json,
+        out,
+        &existing,
+        a.threads,
+        &crate::common::TermProgress::new(false),
+    )?;
     let manifest = finish_build(&a.out, &settings_json)?;
 
     println!(

@@ -5,9 +5,8 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
-use objview_plot::{figure2, Figure2Settings};
-use serde_json::json;
+use anyhow::Result;
+use objview_plot::Figure2Settings;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -24,28 +23,7 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    for p in &a.annotations {
-        if !p.is_file() {
-            anyhow::bail!("{}: no such annotations file", p.display());
-        }
-    }
-    let set = objview_dataset::annotate::read_annotations(&a.annotations).context("reading annotations")?;
-    if set.annotations.is_empty() {
-        let names: Vec<String> = a.annotations.iter().map(|p| p.display().to_string()).collect();
-        anyhow::bail!(
-            "{}: no annotations to plot ({} failure lines, no successful annotation)",
-            names.join(", "),
-            set.failures.len()
-        );
-    }
-    let settings = Figure2Settings { representatives: a.representatives, ..Figure2Settings::default() };
-    let inputs: Vec<String> = a.annotations.iter().map(|p| p.display().to_string()).collect();
-    let provenance = crate::provenance::settings(
-        "pool plot",
-        json!({"inputs": inputs, "annotations": set.annotations.len(), "failures_skipped": set.failures.len()}),
-    );
-    let out = figure2(&set.annotations, &a.out, &settings, &provenance)
-        .with_context(|| format!("drawing Figure 2 into {}", a.out.display()))?;
+    let out = objview_runs::pool::figure(&a.annotations, &a.out, a.representatives)?;
     for f in out.files.iter().chain([&out.figures_json]) {
         println!("{}", f.display());
     }

@@ -60,7 +60,7 @@ pub fn run(a: Args) -> Result<()> {
     }
     // Provenance of every file written above (NPY cannot carry it): `<depth>.json`.
     let k = cam.intrinsics;
-    let meta = crate::provenance::settings(
+    let meta = objview_runs::provenance::settings(
         "render",
         serde_json::json!({
             "mesh": a.mesh.display().to_string(),

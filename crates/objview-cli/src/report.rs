@@ -46,10 +46,6 @@ pub fn run(a: Args) -> Result<()> {
 }
 
 /// Builds and writes the report with default settings; prints the tables when `print`.
-pub fn write(results: &[PathBuf], annotations: &[PathBuf], out: &Path, print: bool) -> Result<Vec<PathBuf>> {
-    report_with(results, annotations, out, &ReportSettings::default(), print)
-}
-
 fn report_with(
     results: &[PathBuf],
     annotations: &[PathBuf],

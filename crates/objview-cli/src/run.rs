@@ -2,21 +2,22 @@
 //! budget; one JSON line per episode (`objview_episode::result::EpisodeResult`), resumable
 //! (objects already in `--out` are skipped), written in input order whatever the thread count.
 
-use std::io::IsTerminal;
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::Parser;
-use objview_dataset::annotate::gt_cloud_path;
-use objview_dataset::{resolve_inputs, run_batch, to_line, ItemOutcome, ObjectRef, ResumableJsonl};
-use objview_episode::{load_scene, run_episode, Budget, EpisodeSettings, SceneSource};
+use objview_dataset::{resolve_inputs, ItemOutcome, ObjectRef};
+use objview_episode::{Budget, EpisodeSettings};
 use objview_geom::normalize::Normalization;
 use objview_geom::Pose;
+use objview_runs::episodes::{check_same_run, episode_note, failure_item};
+use objview_runs::{parse_params, EpisodePlan, RunSummary};
 use objview_views::{ViewSet, ViewSpace};
 use serde_json::json;
+
+use crate::common::TermProgress;
 
 #[derive(Parser, Clone)]
 pub struct Args {
@@ -97,21 +98,12 @@ pub struct Args {
     pub token: Option<String>,
 }
 
-/// The default reference cache folder.
-pub fn default_cache_dir() -> PathBuf {
-    let base = std::env::var_os("XDG_CACHE_HOME")
-        .map(PathBuf::from)
-        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
-        .unwrap_or_else(std::env::temp_dir);
-    base.join("objview").join("reference")
-}
-
-/// Summary of one `run`.
-pub struct RunSummary {
-    pub done: usize,
-    pub failed: usize,
-    pub skipped: usize,
-    pub seconds: f64,
+/// The planner lookup of this binary: every table the CLI links.
+pub fn planners(
+    name: &str,
+    params: &[(String, serde_json::Value)],
+) -> Result<Box<dyn objview_episode::Planner>, String> {
+    objview_planners::registry::with_params(name, params)
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -130,18 +122,9 @@ pub fn run(a: Args) -> Result<()> {
     Ok(())
 }
 
-/// Runs the episodes of `a` (used by `run` and by the demo).
-pub fn execute(a: &Args) -> Result<RunSummary> {
-    let t = Instant::now();
+/// The episode plan of `a` (a local run).
+pub fn plan(a: &Args) -> Result<EpisodePlan> {
     let budget = Budget::parse(&a.budget).map_err(anyhow::Error::msg).context("--budget")?;
-    let params = parse_params(&a.params)?;
-    let probe = objview_planners::registry::with_params(&a.planner, &params).map_err(anyhow::Error::msg)?;
-    if probe.execution_mode() == objview_episode::ExecutionMode::BudgetedPlan && budget == Budget::Auto {
-        bail!("--planner {} is a budgeted plan: give a fixed --budget K (e.g. 5 or 30), not auto", a.planner);
-    }
-    if let Some(url) = &a.server {
-        return execute_remote(a, url, t, budget, &params, probe.as_ref());
-    }
     let space = ViewSpace::resolve(&a.space).with_context(|| format!("--space {}", a.space))?;
     let space_name =
         if ViewSpace::builtin(&a.space).is_some() { a.space.clone() } else { space.name.clone() };
@@ -154,8 +137,6 @@ pub fn execute(a: &Args) -> Result<RunSummary> {
         candidates: a.candidates.clone(),
         ..Default::default()
     };
-    settings.validate().map_err(anyhow::Error::msg)?;
-    let candidates = Arc::new(cands.poses(settings.view_radius));
     let start_pose = match &a.start_pose {
         Some(s) => {
             let p = Pose::parse(s).map_err(anyhow::Error::msg).context("--start-pose")?;
@@ -163,64 +144,39 @@ pub fn execute(a: &Args) -> Result<RunSummary> {
         }
         None => objview_views::start_pose(settings.view_radius),
     };
-    anyhow::ensure!(
-        space.is_feasible(&start_pose),
-        "the start pose is not feasible in view space {}",
-        a.space
-    );
-    let cache_dir =
-        if a.no_cache { None } else { Some(a.cache_dir.clone().unwrap_or_else(default_cache_dir)) };
-    if let Some(dir) = &a.gt_cloud_dir {
-        anyhow::ensure!(dir.is_dir(), "{}: --gt-cloud-dir is not a folder", dir.display());
-    }
-    let objects = resolve_inputs(&a.objects)?;
-    let record = objview_server::spec::RunRecord {
-        planner: &a.planner,
-        planner_params: probe.params(),
-        view_space: &space_name,
-        space: &space,
+    Ok(EpisodePlan {
+        planner: a.planner.clone(),
+        params: parse_params(&a.params)?,
+        space,
+        space_name,
         budget,
+        objects: resolve_inputs(&a.objects)?,
+        out: a.out.clone(),
+        candidates_name: a.candidates.clone(),
+        candidates: Arc::new(cands.poses(settings.view_radius)),
         seed: a.seed,
-        candidates: &a.candidates,
-        candidate_count: candidates.len(),
-        start_pose,
+        threads: a.threads,
         normalize: a.normalize,
-        settings: &settings,
+        gt_cloud_dir: a.gt_cloud_dir.clone(),
+        cache_dir: objview_runs::cache::reference_cache(a.cache_dir.clone(), a.no_cache),
+        start_pose,
+        settings,
+        retry_failed: a.retry_failed,
+    })
+}
+
+/// Runs the episodes of `a`.
+pub fn execute(a: &Args) -> Result<RunSummary> {
+    if let Some(url) = &a.server {
+        let t = Instant::now();
+        let budget = Budget::parse(&a.budget).map_err(anyhow::Error::msg).context("--budget")?;
+        let params = parse_params(&a.params)?;
+        let probe = planners(&a.planner, &params).map_err(anyhow::Error::msg)?;
+        objview_runs::episodes::check_budget(&a.planner, probe.as_ref(), budget)?;
+        return execute_remote(a, url, t, budget, &params, probe.as_ref());
     }
-    .to_json();
-    check_same_run(&a.out, &record)?;
-    let work = |obj: &ObjectRef| -> Result<String> {
-        let gt = gt_cloud_path(obj, a.gt_cloud_dir.as_deref())?;
-        let src = SceneSource {
-            uid: &obj.uid,
-            mesh: &obj.mesh,
-            gt_cloud: gt.as_deref(),
-            normalization: a.normalize,
-        };
-        let scene = Arc::new(load_scene(&src, &space, &space_name, &settings, cache_dir.as_deref())?);
-        let mut planner =
-            objview_planners::registry::with_params(&a.planner, &params).map_err(anyhow::Error::msg)?;
-        let res = run_episode(
-            scene,
-            planner.as_mut(),
-            &settings,
-            budget,
-            a.seed,
-            start_pose,
-            candidates.clone(),
-            record.clone(),
-        )?;
-        Ok(to_line(&res))
-    };
-    let failure = |obj: &ObjectRef, e: &anyhow::Error| {
-        to_line(&json!({
-            "uid": obj.uid,
-            "mesh": obj.mesh.display().to_string(),
-            "error": crate::one_line(e),
-            "settings": record,
-        }))
-    };
-    batch(a, &objects, &space_name, budget, t, work, failure)
+    let plan = plan(a)?;
+    Ok(plan.run(&planners, &TermProgress::new(a.quiet))?)
 }
 
 /// `run --server`: the same episodes against an evaluation server. Objects are `SPLIT` or
@@ -301,7 +257,7 @@ fn execute_remote(
             .with_context(|| format!("--candidates {} on the server", a.candidates))?,
     );
     // What this side knows of the settings record (the server writes the full one).
-    let record = crate::provenance::settings(
+    let record = objview_runs::provenance::settings(
         "run",
         json!({
             "planner": a.planner,
@@ -315,8 +271,7 @@ fn execute_remote(
     );
     check_same_run(&a.out, &record)?;
     let work = |obj: &ObjectRef| -> Result<String> {
-        let mut planner =
-            objview_planners::registry::with_params(&a.planner, params).map_err(anyhow::Error::msg)?;
+        let mut planner = planners(&a.planner, params).map_err(anyhow::Error::msg)?;
         let ep = objview_server::client::RemoteEpisode {
             split: obj.mesh.to_string_lossy().into_owned(),
             object: obj.uid.clone(),
@@ -328,147 +283,20 @@ fn execute_remote(
         };
         Ok(objview_server::client::run_remote(&client, planner.as_mut(), &ep, candidates.clone())?)
     };
-    let failure = |obj: &ObjectRef, e: &anyhow::Error| {
-        to_line(&json!({
-            "uid": obj.uid,
-            "split": obj.mesh.display().to_string(),
-            "error": crate::one_line(e),
-            "settings": record,
-        }))
-    };
-    batch(a, &objects, &a.space, budget, t, work, failure)
-}
-
-/// Runs `work` over `objects` into `a.out` (resumable, input order, `--threads` workers) with
-/// progress lines; `failure` makes the line of an object whose episode failed.
-fn batch(
-    a: &Args,
-    objects: &[ObjectRef],
-    space_name: &str,
-    budget: Budget,
-    t: Instant,
-    work: impl Fn(&ObjectRef) -> Result<String> + Sync,
-    failure: impl Fn(&ObjectRef, &anyhow::Error) -> String + Sync,
-) -> Result<RunSummary> {
-    let (out, existing) = ResumableJsonl::open(&a.out, "uid", a.retry_failed)?;
-    if existing.torn {
-        eprintln!(
-            "{}: cut off a torn last line (an interrupted write); that object is redone",
-            a.out.display()
-        );
-    }
-    let todo = objects.iter().filter(|o| !existing.done.contains(&o.uid)).count();
-    if !a.quiet {
-        eprintln!(
-            "run {} / {} / budget {}: {} objects, {} already in {}, {todo} to do",
-            a.planner,
-            space_name,
-            budget.label(),
-            objects.len(),
-            objects.len() - todo,
-            a.out.display()
-        );
-    }
-    let threads = a.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    anyhow::ensure!(threads >= 1, "--threads must be at least 1");
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("thread pool")?;
-    let bar = if a.quiet { indicatif::ProgressBar::hidden() } else { crate::common::progress(todo as u64) };
-    let terminal = std::io::stderr().is_terminal();
-    let done = AtomicUsize::new(0);
-    let work = |obj: &ObjectRef| match work(obj) {
-        Ok(line) => ItemOutcome { line, failed: false },
-        Err(e) => ItemOutcome { line: failure(obj, &e), failed: true },
-    };
-    let progress = |obj: &ObjectRef, outcome: &ItemOutcome| {
-        let i = done.fetch_add(1, Ordering::Relaxed) + 1;
-        bar.inc(1);
-        if a.quiet {
-            return;
+    let item = |obj: &ObjectRef| match work(obj) {
+        Ok(line) => {
+            let note = serde_json::from_str::<objview_episode::EpisodeResult>(&line)
+                .map(|r| episode_note(&r))
+                .unwrap_or_default();
+            ItemOutcome { line, failed: false, note }
         }
-        let v: serde_json::Value = serde_json::from_str(&outcome.line).unwrap_or_default();
-        let msg = if outcome.failed {
-            format!("[{i}/{todo}] {}: FAILED: {}", obj.uid, v["error"].as_str().unwrap_or("?"))
-        } else {
-            let t = &v["checkpoints"]["terminal"];
-            format!(
-                "[{i}/{todo}] {}: {} views, NSC@0.02 {:.3}, SC@0.02 {:.3}, path {:.2}, {} ({})",
-                obj.uid,
-                t["views"],
-                t["nsc"]["0.02"].as_f64().unwrap_or(f64::NAN),
-                t["sc"]["0.02"].as_f64().unwrap_or(f64::NAN),
-                t["path_cost"].as_f64().unwrap_or(f64::NAN),
-                v["terminal_reason"].as_str().unwrap_or("?"),
-                v["terminal_source"].as_str().unwrap_or("?"),
-            )
-        };
-        if terminal {
-            bar.println(msg);
-        } else {
-            eprintln!("{msg}");
-        }
+        Err(e) => failure_item(obj, "split", &obj.mesh.display().to_string(), &crate::one_line(&e), &record),
     };
-    let summary = pool.install(|| run_batch(objects, out, &existing, work, progress))?;
-    bar.finish_and_clear();
-    Ok(RunSummary {
-        done: summary.processed - summary.failed,
-        failed: summary.failed,
-        skipped: summary.skipped,
-        seconds: t.elapsed().as_secs_f64(),
-    })
-}
-
-/// `NAME=VALUE` pairs; VALUE is parsed as JSON, else taken as a string.
-fn parse_params(raw: &[String]) -> Result<Vec<(String, serde_json::Value)>> {
-    raw.iter()
-        .map(|p| {
-            let (k, v) = p.split_once('=').with_context(|| format!("--param {p:?}: expected NAME=VALUE"))?;
-            let value = serde_json::from_str(v).unwrap_or_else(|_| serde_json::Value::String(v.to_string()));
-            Ok((k.trim().to_string(), value))
-        })
-        .collect()
-}
-
-/// Refuses to resume a results file written by a different run (planner, space, budget, seed,
-/// candidates or settings), which would otherwise silently skip its objects.
-fn check_same_run(out: &Path, record: &serde_json::Value) -> Result<()> {
-    let Ok(text) = std::fs::read_to_string(out) else { return Ok(()) };
-    for (i, line) in text.lines().enumerate() {
-        let Ok(v) = serde_json::from_str::<serde_json::Value>(line) else { continue };
-        let old = &v["settings"];
-        for key in [
-            "planner",
-            "planner_params",
-            "view_space",
-            "budget",
-            "seed",
-            "candidates",
-            "start_pose",
-            "episode",
-        ] {
-            let mut a = old[key].clone();
-            let mut b = record[key].clone();
-            if a.is_null() || b.is_null() {
-                // A remote run's lines and failure lines know only part of the record.
-                continue;
-            }
-            if key == "episode" {
-                // Timings on/off do not change what an episode is.
-                for x in [&mut a, &mut b] {
-                    if let Some(m) = x.as_object_mut() {
-                        m.remove("record_timings");
-                    }
-                }
-            }
-            if a != b {
-                bail!(
-                    "{}:{}: this results file holds another run ({key} = {} here, {} now); use another --out",
-                    out.display(),
-                    i + 1,
-                    a,
-                    b
-                );
-            }
-        }
-    }
-    Ok(())
+    // The remote plan: only what the batch driver needs (results file, threads, labels).
+    let mut plan = EpisodePlan::new(&a.planner, Vec::new(), a.out.clone())?;
+    plan.budget = budget;
+    plan.threads = a.threads;
+    plan.retry_failed = a.retry_failed;
+    let s = plan.drive(&objects, &a.space, item, &TermProgress::new(a.quiet))?;
+    Ok(RunSummary::from_batch(&s, t))
 }

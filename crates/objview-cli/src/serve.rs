@@ -73,7 +73,7 @@ pub fn run(a: Args) -> Result<()> {
         cache_dir: if a.no_cache {
             None
         } else {
-            Some(a.cache_dir.unwrap_or_else(crate::run::default_cache_dir))
+            Some(a.cache_dir.unwrap_or_else(objview_runs::cache::default_reference_cache))
         },
         normalize: a.normalize,
         scene_cache: a.scene_cache,

@@ -55,7 +55,7 @@ pub fn run(a: Args) -> Result<()> {
         "surface_voxels": set.len(),
         "per_view": per_view.iter().map(|o| o.len()).collect::<Vec<_>>(),
         "union": union.len(),
-        "settings": crate::provenance::settings("visibility", json!({
+        "settings": objview_runs::provenance::settings("visibility", json!({
             "mesh": a.mesh.display().to_string(),
             "normalize": a.normalize.to_string(),
             "gt_cloud": gt.source,

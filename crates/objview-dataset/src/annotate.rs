@@ -407,6 +407,36 @@ pub fn annotate_object(
     })
 }
 
+impl Annotation {
+    /// The progress note of this annotation: `r_vis=0.912 d_sat=12 d_plan=7 (optimal) 3.10 s`.
+    pub fn progress_note(&self) -> String {
+        let d_plan = self.d_plan.map_or_else(|| "none".to_string(), |d| d.to_string());
+        format!(
+            "r_vis={:.3} d_sat={} d_plan={d_plan} ({}) {:.2} s",
+            self.r_vis, self.d_sat, self.d_plan_status, self.seconds
+        )
+    }
+}
+
+/// Annotates `obj` ([`annotate_object`]) as one item of a batch: its line (the annotation or
+/// its failure) and progress note.
+pub fn annotate_item(
+    obj: &ObjectRef,
+    settings: &AnnotateSettings,
+    views: &GridViews,
+    settings_json: &Value,
+) -> crate::ItemOutcome {
+    match annotate_object(obj, settings, views, settings_json) {
+        Ok(ann) => {
+            crate::ItemOutcome { line: crate::to_line(&ann), failed: false, note: ann.progress_note() }
+        }
+        Err(e) => {
+            let f = failure(obj, &e, settings_json);
+            crate::ItemOutcome { line: crate::to_line(&f), failed: true, note: f.error }
+        }
+    }
+}
+
 /// The failure line of `obj`.
 pub fn failure(obj: &ObjectRef, error: &DatasetError, settings_json: &Value) -> Failure {
     Failure {

@@ -1,8 +1,16 @@
-//! The loop shared by batch commands: skip what a results file already holds, process the rest
-//! in parallel (rayon), and append one line per item in input order as soon as it and every
-//! earlier item are finished, so an interrupted batch resumes where it stopped and a finished one
-//! is the same file whatever the thread count.
+//! The loop shared by batch commands (`annotate`, `run`, `pool build`): skip what a results
+//! file already holds, process the rest in parallel (rayon), and append one line per item in
+//! input order as soon as it and every earlier item are finished, so an interrupted batch
+//! resumes where it stopped and a finished one is the same file whatever the thread count.
+//!
+//! [`drive`] is the one batch driver: it builds the worker pool, announces the batch
+//! ([`BatchStart`]), runs [`run_batch`] and hands every finished item to a [`Progress`] as a
+//! typed [`ItemProgress`] — the item's own one-line note, made from the typed value that also
+//! became its line, so nothing re-parses the JSON it just wrote.
 
+use std::fmt;
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
 use rayon::prelude::*;
@@ -11,13 +19,16 @@ use crate::error::DatasetError;
 use crate::inputs::ObjectRef;
 use crate::jsonl::{Existing, OrderedWriter, ResumableJsonl};
 
-/// What processing one item gave: its line and whether it is a failure line.
+/// What processing one item gave: its line, whether it is a failure line, and its progress note.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ItemOutcome {
     /// One JSON line ([`crate::to_line`]).
     pub line: String,
     /// Whether the line records a failure.
     pub failed: bool,
+    /// One line for progress output, made by the producer from the typed value (e.g.
+    /// `r_vis=0.912 d_sat=12 d_plan=7 (optimal) 3.10 s`, or the error of a failure).
+    pub note: String,
 }
 
 /// Counts of a finished batch.
@@ -31,6 +42,146 @@ pub struct BatchSummary {
     pub processed: usize,
     /// Of those, failures.
     pub failed: usize,
+}
+
+/// How a batch starts: printed once by [`drive`] through [`Progress::start`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct BatchStart {
+    /// What runs, e.g. `annotate`, `pool build`, `run rse / whole / budget auto`.
+    pub what: String,
+    /// A part of the input, e.g. `shard 0/4` (printed in parentheses), if any.
+    pub scope: Option<String>,
+    /// Items in the input.
+    pub total: usize,
+    /// Items the results file already holds.
+    pub already: usize,
+    /// Items to do now.
+    pub todo: usize,
+    /// The results file.
+    pub out: std::path::PathBuf,
+    /// A trailing remark, e.g. `640 views per object`, if any.
+    pub remark: Option<String>,
+}
+
+impl fmt::Display for BatchStart {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}: {} objects", self.what, self.total)?;
+        if let Some(s) = &self.scope {
+            write!(f, " ({s})")?;
+        }
+        write!(f, ", {} already in {}, {} to do", self.already, self.out.display(), self.todo)?;
+        if let Some(r) = &self.remark {
+            write!(f, "; {r}")?;
+        }
+        Ok(())
+    }
+}
+
+/// One finished item, as progress output sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ItemProgress<'a> {
+    /// Items finished so far in this batch, this one included (1-based).
+    pub done: usize,
+    /// Items to do in this batch.
+    pub todo: usize,
+    /// The item's uid.
+    pub uid: &'a str,
+    /// Whether it failed.
+    pub failed: bool,
+    /// Its note ([`ItemOutcome::note`]).
+    pub note: &'a str,
+}
+
+impl fmt::Display for ItemProgress<'_> {
+    /// `[3/10] mug: <note>`, or `[3/10] mug: FAILED: <note>` for a failure.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "[{}/{}] {}: ", self.done, self.todo, self.uid)?;
+        if self.failed {
+            f.write_str("FAILED: ")?;
+        }
+        f.write_str(self.note)
+    }
+}
+
+/// Where a batch reports what it does (a terminal with a progress bar, a log, nothing).
+/// Called from worker threads.
+pub trait Progress: Sync {
+    /// The results file had a torn last line, which was cut off (that item is redone).
+    fn torn(&self, _out: &Path) {}
+    /// The batch starts.
+    fn start(&self, _start: &BatchStart) {}
+    /// One item finished.
+    fn item(&self, _item: &ItemProgress<'_>) {}
+    /// The batch ended (successfully or not).
+    fn finish(&self) {}
+}
+
+/// A [`Progress`] that reports nothing.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Silent;
+
+impl Progress for Silent {}
+
+/// The number of worker threads for `threads` (`None`: every core); 0 is an error.
+pub fn thread_count(threads: Option<usize>) -> Result<usize, DatasetError> {
+    let n = threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    if n == 0 {
+        return Err(DatasetError::InvalidSetting { name: "--threads", reason: "must be at least 1".into() });
+    }
+    Ok(n)
+}
+
+/// The batch driver of every batch command: announces the batch (`what`, `scope`, `remark`:
+/// see [`BatchStart`]), runs `work` over the items not yet in the results file on `threads`
+/// workers ([`thread_count`]), writes lines in input order to `out` and reports each finished
+/// item to `progress`.
+#[allow(clippy::too_many_arguments)]
+pub fn drive<W>(
+    what: &str,
+    scope: Option<String>,
+    remark: Option<String>,
+    items: &[ObjectRef],
+    out: ResumableJsonl,
+    existing: &Existing,
+    threads: Option<usize>,
+    work: W,
+    progress: &dyn Progress,
+) -> Result<BatchSummary, DatasetError>
+where
+    W: Fn(&ObjectRef) -> ItemOutcome + Sync,
+{
+    let threads = thread_count(threads)?;
+    if existing.torn {
+        progress.torn(out.path());
+    }
+    let todo = items.iter().filter(|o| !existing.done.contains(&o.uid)).count();
+    progress.start(&BatchStart {
+        what: what.to_string(),
+        scope,
+        total: items.len(),
+        already: items.len() - todo,
+        todo,
+        out: out.path().to_path_buf(),
+        remark,
+    });
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| {
+        DatasetError::InvalidSetting { name: "--threads", reason: format!("thread pool: {e}") }
+    })?;
+    let done = AtomicUsize::new(0);
+    let report = |obj: &ObjectRef, outcome: &ItemOutcome| {
+        let i = done.fetch_add(1, Ordering::Relaxed) + 1;
+        progress.item(&ItemProgress {
+            done: i,
+            todo,
+            uid: &obj.uid,
+            failed: outcome.failed,
+            note: &outcome.note,
+        });
+    };
+    let work = &work;
+    let summary = pool.install(|| run_batch(items, out, existing, work, report));
+    progress.finish();
+    summary
 }
 
 /// Runs `work` on every item of `items` whose uid is not in `existing.done`, in parallel on the
@@ -50,11 +201,11 @@ where
 {
     let todo: Vec<&ObjectRef> = items.iter().filter(|o| !existing.done.contains(&o.uid)).collect();
     let writer = Mutex::new(OrderedWriter::new(out));
-    let failed = std::sync::atomic::AtomicUsize::new(0);
+    let failed = AtomicUsize::new(0);
     todo.par_iter().enumerate().try_for_each(|(seq, obj)| {
         let outcome = work(obj);
         if outcome.failed {
-            failed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            failed.fetch_add(1, Ordering::Relaxed);
         }
         progress(obj, &outcome);
         let mut w = writer.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
@@ -84,7 +235,7 @@ mod tests {
         std::thread::sleep(std::time::Duration::from_millis(spin as u64));
         let failed = o.uid.ends_with('3');
         let v = if failed { json!({"error": "boom", "uid": o.uid}) } else { json!({"uid": o.uid}) };
-        ItemOutcome { line: crate::to_line(&v), failed }
+        ItemOutcome { line: crate::to_line(&v), failed, note: String::new() }
     }
 
     #[test]
@@ -142,5 +293,69 @@ mod tests {
         let s = run_batch(&items, out, &ex, work, |_, _| panic!("nothing to redo")).unwrap();
         assert_eq!((s.skipped, s.processed), (30, 0));
         assert_eq!(std::fs::read_to_string(&crashed).unwrap(), expected);
+    }
+
+    /// Records every event as text.
+    #[derive(Default)]
+    struct Recorder(Mutex<Vec<String>>);
+
+    impl Progress for Recorder {
+        fn torn(&self, out: &Path) {
+            self.0.lock().unwrap().push(format!("torn {}", out.file_name().unwrap().to_string_lossy()));
+        }
+        fn start(&self, s: &BatchStart) {
+            self.0.lock().unwrap().push(s.to_string());
+        }
+        fn item(&self, p: &ItemProgress<'_>) {
+            self.0.lock().unwrap().push(p.to_string());
+        }
+        fn finish(&self) {
+            self.0.lock().unwrap().push("finish".into());
+        }
+    }
+
+    fn noted(o: &ObjectRef) -> ItemOutcome {
+        let failed = o.uid.ends_with('1');
+        ItemOutcome {
+            line: crate::to_line(&json!({"uid": o.uid})),
+            failed,
+            note: if failed { "boom".into() } else { format!("{} done", o.uid) },
+        }
+    }
+
+    #[test]
+    fn drive_announces_the_batch_and_reports_each_item_with_its_own_note() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("r.jsonl");
+        std::fs::write(&path, "{\"uid\":\"o000\"}\n{\"uid\":\"o0").unwrap();
+        let (out, ex) = ResumableJsonl::open(&path, "uid", false).unwrap();
+        let rec = Recorder::default();
+        let s = drive(
+            "annotate",
+            Some("shard 0/1".into()),
+            Some("9 views".into()),
+            &objs(3),
+            out,
+            &ex,
+            Some(1),
+            noted,
+            &rec,
+        )
+        .unwrap();
+        assert_eq!((s.total, s.skipped, s.processed, s.failed), (3, 1, 2, 1));
+        let events = rec.0.into_inner().unwrap();
+        assert_eq!(events[0], "torn r.jsonl");
+        assert_eq!(
+            events[1],
+            format!("annotate: 3 objects (shard 0/1), 1 already in {}, 2 to do; 9 views", path.display())
+        );
+        // One worker: items finish in input order.
+        assert_eq!(events[2..], ["[1/2] o001: FAILED: boom", "[2/2] o002: o002 done", "finish"]);
+    }
+
+    #[test]
+    fn zero_threads_is_an_error_naming_the_flag() {
+        assert!(thread_count(Some(0)).unwrap_err().to_string().contains("--threads"));
+        assert!(thread_count(None).unwrap() >= 1);
     }
 }

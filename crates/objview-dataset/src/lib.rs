@@ -2,7 +2,8 @@
 //!
 //! - [`inputs`]: mesh files, folders and split files → objects with uids; `--shard I/N`.
 //! - [`jsonl`]: crash-safe, resumable JSON Lines results written in input order.
-//! - [`batch`]: the parallel, resumable loop shared by batch commands (`annotate`, `run`).
+//! - [`batch`]: the batch driver: the parallel, resumable loop shared by batch commands
+//!   (`annotate`, `run`, `pool build`) and its typed progress events.
 //! - [`annotate`]: one object's saturation curve, r_vis, d_sat and exact d_plan.
 
 pub mod annotate;
@@ -12,10 +13,10 @@ pub mod inputs;
 pub mod jsonl;
 
 pub use annotate::{
-    annotate_object, read_annotations, AnnotateSettings, Annotation, AnnotationSet, Failure, GridViews,
-    StageTimings,
+    annotate_item, annotate_object, read_annotations, AnnotateSettings, Annotation, AnnotationSet, Failure,
+    GridViews, StageTimings,
 };
-pub use batch::{run_batch, BatchSummary, ItemOutcome};
+pub use batch::{drive, run_batch, BatchStart, BatchSummary, ItemOutcome, ItemProgress, Progress, Silent};
 pub use error::DatasetError;
 pub use inputs::{read_split, resolve_inputs, ObjectRef, Shard};
 pub use jsonl::{to_line, Existing, OrderedWriter, ResumableJsonl};

@@ -27,7 +27,9 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use objview_dataset::{run_batch, to_line, BatchSummary, Existing, ItemOutcome, ObjectRef, ResumableJsonl};
+use objview_dataset::{
+    drive, to_line, BatchSummary, Existing, ItemOutcome, ObjectRef, Progress, ResumableJsonl,
+};
 use objview_geom::cloud::{cloud_count, read_cloud, sample_surface, write_pcd_binary, DEFAULT_CLOUD_SEED};
 use objview_geom::io::load_mesh;
 use objview_geom::normalize::{normalize, Normalization, Transform};
@@ -461,8 +463,19 @@ impl BuildRecord {
     /// The line of the batch loop (rejections are failure lines).
     pub fn outcome(&self) -> ItemOutcome {
         match self {
-            BuildRecord::Accepted(a) => ItemOutcome { line: to_line(a), failed: false },
-            BuildRecord::Rejected(r) => ItemOutcome { line: to_line(r), failed: true },
+            BuildRecord::Accepted(a) => ItemOutcome {
+                line: to_line(a),
+                failed: false,
+                note: format!(
+                    "{} faces, area {:.3}, {} surface voxels",
+                    a.stats.faces, a.stats.surface_area, a.stats.surface_voxels
+                ),
+            },
+            BuildRecord::Rejected(r) => ItemOutcome {
+                line: to_line(r),
+                failed: true,
+                note: format!("rejected ({}): {}", r.reason, r.error),
+            },
         }
     }
 }
@@ -599,23 +612,23 @@ pub fn open_build_log(
     Ok(ResumableJsonl::open(&path, "uid", retry_failed)?)
 }
 
-/// Builds every object of `objects` not in `existing` (parallel on the current rayon pool),
-/// appending one line each to `out` ([`open_build_log`]); `progress` sees each object's outcome.
-pub fn run_build<P>(
+/// Builds every object of `objects` not in `existing` on `threads` workers (`None`: every
+/// core) through the batch driver ([`objview_dataset::drive`]), appending one line each to
+/// `out` ([`open_build_log`]); `progress` sees the batch start and each object's outcome.
+#[allow(clippy::too_many_arguments)]
+pub fn run_build(
     objects: &[ObjectRef],
     pool_dir: &Path,
     settings: &BuildSettings,
     settings_json: &Value,
     out: ResumableJsonl,
     existing: &Existing,
-    progress: P,
-) -> Result<BatchSummary, PoolError>
-where
-    P: Fn(&ObjectRef, &ItemOutcome) + Sync,
-{
+    threads: Option<usize>,
+    progress: &dyn Progress,
+) -> Result<BatchSummary, PoolError> {
     settings.validate()?;
     let work = |obj: &ObjectRef| build_object(obj, pool_dir, settings, settings_json).outcome();
-    Ok(run_batch(objects, out, existing, work, progress)?)
+    Ok(drive("pool build", None, None, objects, out, existing, threads, work, progress)?)
 }
 
 /// Quantiles of one statistic over the accepted objects.
@@ -991,9 +1004,9 @@ mod tests {
     ) -> BatchSummary {
         let sj = json!({"tool": "objview", "version": "test", "build": settings.to_json()});
         let (out, ex) = open_build_log(pool, &sj, retry).unwrap();
-        let rayon_pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
         let summary =
-            rayon_pool.install(|| run_build(objects, pool, settings, &sj, out, &ex, |_, _| {})).unwrap();
+            run_build(objects, pool, settings, &sj, out, &ex, Some(threads), &objview_dataset::Silent)
+                .unwrap();
         finish_build(pool, &sj).unwrap();
         summary
     }

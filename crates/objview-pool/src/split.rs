@@ -297,6 +297,49 @@ pub struct Splits {
 }
 
 impl Splits {
+    /// The human summary of a split: counts, the hidden-test quota and train size, and the
+    /// d_plan bucket table of the main pool and each main split (`objview pool split` prints
+    /// it). `annotations` is the number of annotations read; `test_fraction` the setting.
+    pub fn summary_text(&self, annotations: usize, test_fraction: f64) -> String {
+        use std::fmt::Write as _;
+        let mut t = String::new();
+        let _ = writeln!(
+            t,
+            "pool split: {annotations} annotations ({} failure lines ignored): {} slow-saturation, {} main, {} excluded \
+             (no proven d_plan; reasons in {REPORT_FILE})",
+            self.failures,
+            self.slow_saturation.len(),
+            self.main(),
+            self.excluded.len()
+        );
+        let _ = writeln!(
+            t,
+            "hidden-test quota {} (fraction {test_fraction}), train size {}",
+            self.hidden_test_quota, self.train_size
+        );
+        let main_splits = &SplitName::ALL[1..];
+        let short = |s: &SplitName| s.as_str().trim_start_matches("main_");
+        let _ = write!(t, "\n{:<8} {:>6}", "d_plan", "main");
+        for s in main_splits {
+            let _ = write!(t, " {:>14}", short(s));
+        }
+        t.push('\n');
+        let per_split: Vec<Vec<usize>> = main_splits.iter().map(|&s| self.bucket_counts(s)).collect();
+        for b in 0..self.main_buckets.len() {
+            let _ = write!(t, "{:<8} {:>6}", bucket_label(b), self.main_buckets[b]);
+            for c in &per_split {
+                let _ = write!(t, " {:>14}", c[b]);
+            }
+            t.push('\n');
+        }
+        let _ = write!(t, "{:<8} {:>6}", "total", self.main());
+        for &s in main_splits {
+            let _ = write!(t, " {:>14}", self.get(s).len());
+        }
+        t.push('\n');
+        t
+    }
+
     /// The objects of one split.
     pub fn get(&self, name: SplitName) -> &[Annotation] {
         match name {

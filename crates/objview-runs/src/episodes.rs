@@ -1,0 +1,359 @@
+//! A batch of online episodes (SPEC §5): one planner, view space, budget and seed over a list
+//! of objects, one result line each ([`objview_episode::EpisodeResult`]), resumable (objects
+//! already in the results file are skipped), written in input order whatever the thread count.
+//!
+//! [`EpisodePlan`] is everything such a run is: `objview run` builds one from its arguments,
+//! the demo builds several, benchmarks and training-data generation build their own. The
+//! settings record of its lines ([`crate::record::RunRecord`]) identifies the run; a results
+//! file of another run is refused ([`check_same_run`]) rather than silently "resumed".
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use objview_dataset::annotate::gt_cloud_path;
+use objview_dataset::{drive, to_line, BatchSummary, ItemOutcome, ObjectRef, Progress, ResumableJsonl};
+use objview_episode::{
+    load_scene, run_episode, Budget, EpisodeResult, EpisodeSettings, ExecutionMode, Planner, SceneSource,
+};
+use objview_geom::normalize::Normalization;
+use objview_geom::Pose;
+use objview_views::ViewSpace;
+use serde_json::{json, Value};
+
+use crate::params::Params;
+use crate::record::RunRecord;
+use crate::RunError;
+
+/// Makes a fresh planner from a name and parameters (the planner registry's lookup).
+pub type PlannerFactory<'a> =
+    &'a (dyn Fn(&str, &[(String, Value)]) -> Result<Box<dyn Planner>, String> + Sync);
+
+/// One episode run over objects, fully resolved.
+#[derive(Debug, Clone)]
+pub struct EpisodePlan {
+    /// The planner's name in the registry.
+    pub planner: String,
+    /// Its parameters (`--param NAME=VALUE`).
+    pub params: Params,
+    /// The view space.
+    pub space: ViewSpace,
+    /// The view-space name results record (`whole`, or a rule file's own name).
+    pub space_name: String,
+    /// The budget protocol.
+    pub budget: Budget,
+    /// The objects, in output order.
+    pub objects: Vec<ObjectRef>,
+    /// The results file (JSON Lines).
+    pub out: PathBuf,
+    /// The candidate set's name (`tammes-360`, a file).
+    pub candidates_name: String,
+    /// Its poses at the episode's view radius.
+    pub candidates: Arc<Vec<Pose>>,
+    /// The user seed (mixed per object, view space and budget).
+    pub seed: u64,
+    /// Parallel episodes (`None`: every core).
+    pub threads: Option<usize>,
+    /// How meshes are normalized.
+    pub normalize: Normalization,
+    /// Folder of ground-truth clouds `<uid>.{pcd,ply,npy,npz}`; `None`: sampled.
+    pub gt_cloud_dir: Option<PathBuf>,
+    /// Observable-reference cache folder; `None`: no disk cache.
+    pub cache_dir: Option<PathBuf>,
+    /// The start pose (object frame, normalized units, roll in radians).
+    pub start_pose: Pose,
+    /// Every episode constant (cap, checkpoints, enough-info rule, timings on/off).
+    pub settings: EpisodeSettings,
+    /// Redo objects whose earlier line is a failure.
+    pub retry_failed: bool,
+}
+
+/// Counts of a finished run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunSummary {
+    /// Episodes run now that gave a result.
+    pub done: usize,
+    /// Objects whose episode could not run (failure lines).
+    pub failed: usize,
+    /// Objects already in the results file.
+    pub skipped: usize,
+    /// Wall time, seconds.
+    pub seconds: f64,
+}
+
+impl RunSummary {
+    /// From the batch driver's counts and the start time.
+    pub fn from_batch(s: &BatchSummary, started: Instant) -> RunSummary {
+        RunSummary {
+            done: s.processed - s.failed,
+            failed: s.failed,
+            skipped: s.skipped,
+            seconds: started.elapsed().as_secs_f64(),
+        }
+    }
+}
+
+impl EpisodePlan {
+    /// A plan with the SPEC defaults for everything but the planner, objects and output:
+    /// view space `whole`, budget `auto`, candidates `tammes-360`, seed 0, every core, unit
+    /// normalization, sampled ground truth, the default reference cache, the default start
+    /// pose and the default episode settings.
+    pub fn new(planner: &str, objects: Vec<ObjectRef>, out: PathBuf) -> Result<EpisodePlan, RunError> {
+        let settings = EpisodeSettings::default();
+        let space =
+            ViewSpace::builtin("whole").ok_or_else(|| RunError::Invalid("no view space whole".into()))?;
+        let candidates = objview_views::ViewSet::resolve("tammes-360")
+            .map_err(|e| RunError::Invalid(format!("tammes-360: {e}")))?
+            .poses(settings.view_radius);
+        Ok(EpisodePlan {
+            planner: planner.to_string(),
+            params: Vec::new(),
+            space,
+            space_name: "whole".into(),
+            budget: Budget::Auto,
+            objects,
+            out,
+            candidates_name: "tammes-360".into(),
+            candidates: Arc::new(candidates),
+            seed: 0,
+            threads: None,
+            normalize: Normalization::Unit,
+            gt_cloud_dir: None,
+            cache_dir: Some(crate::cache::default_reference_cache()),
+            start_pose: objview_views::start_pose(settings.view_radius),
+            settings,
+            retry_failed: false,
+        })
+    }
+
+    /// What the batch is called in progress output: `run rse / whole / budget auto`.
+    pub fn label(&self) -> String {
+        format!("run {} / {} / budget {}", self.planner, self.space_name, self.budget.label())
+    }
+
+    /// Checks what can be checked before any episode: the planner and its parameters, the
+    /// budget against its execution mode, the settings, the start pose's feasibility, the
+    /// ground-truth folder. Returns a probe planner (for its recorded parameters).
+    pub fn validate(&self, planners: PlannerFactory<'_>) -> Result<Box<dyn Planner>, RunError> {
+        let probe = planners(&self.planner, &self.params).map_err(RunError::Invalid)?;
+        check_budget(&self.planner, probe.as_ref(), self.budget)?;
+        self.settings.validate().map_err(RunError::Invalid)?;
+        if !self.space.is_feasible(&self.start_pose) {
+            return Err(RunError::Invalid(format!(
+                "the start pose is not feasible in view space {}",
+                self.space_name
+            )));
+        }
+        if let Some(dir) = &self.gt_cloud_dir {
+            if !dir.is_dir() {
+                return Err(RunError::Invalid(format!("{}: --gt-cloud-dir is not a folder", dir.display())));
+            }
+        }
+        Ok(probe)
+    }
+
+    /// The settings record of this run's lines.
+    pub fn record(&self, probe: &dyn Planner) -> Value {
+        RunRecord {
+            planner: &self.planner,
+            planner_params: probe.params(),
+            view_space: &self.space_name,
+            space: &self.space,
+            budget: self.budget,
+            seed: self.seed,
+            candidates: &self.candidates_name,
+            candidate_count: self.candidates.len(),
+            start_pose: self.start_pose,
+            normalize: self.normalize,
+            settings: &self.settings,
+        }
+        .to_json()
+    }
+
+    /// One episode of `obj` with a fresh planner; `record` is [`EpisodePlan::record`].
+    pub fn episode(
+        &self,
+        obj: &ObjectRef,
+        planners: PlannerFactory<'_>,
+        record: &Value,
+    ) -> Result<EpisodeResult, RunError> {
+        let gt = gt_cloud_path(obj, self.gt_cloud_dir.as_deref())?;
+        let src = SceneSource {
+            uid: &obj.uid,
+            mesh: &obj.mesh,
+            gt_cloud: gt.as_deref(),
+            normalization: self.normalize,
+        };
+        let scene = Arc::new(load_scene(
+            &src,
+            &self.space,
+            &self.space_name,
+            &self.settings,
+            self.cache_dir.as_deref(),
+        )?);
+        let mut planner = planners(&self.planner, &self.params).map_err(RunError::Invalid)?;
+        Ok(run_episode(
+            scene,
+            planner.as_mut(),
+            &self.settings,
+            self.budget,
+            self.seed,
+            self.start_pose,
+            self.candidates.clone(),
+            record.clone(),
+        )?)
+    }
+
+    /// Runs the plan's episodes into its results file.
+    pub fn run(&self, planners: PlannerFactory<'_>, progress: &dyn Progress) -> Result<RunSummary, RunError> {
+        let t = Instant::now();
+        let probe = self.validate(planners)?;
+        let record = self.record(probe.as_ref());
+        check_same_run(&self.out, &record)?;
+        let work = |obj: &ObjectRef| match self.episode(obj, planners, &record) {
+            Ok(res) => episode_item(&res),
+            Err(e) => failure_item(obj, "mesh", &obj.mesh.display().to_string(), &e.to_string(), &record),
+        };
+        let summary = self.drive(&self.objects, &self.space_name, work, progress)?;
+        Ok(RunSummary::from_batch(&summary, t))
+    }
+
+    /// The batch driver over `objects` into this plan's results file (shared with runs whose
+    /// episodes happen elsewhere, e.g. on an evaluation server).
+    pub fn drive(
+        &self,
+        objects: &[ObjectRef],
+        space_name: &str,
+        work: impl Fn(&ObjectRef) -> ItemOutcome + Sync,
+        progress: &dyn Progress,
+    ) -> Result<BatchSummary, RunError> {
+        let (out, existing) = ResumableJsonl::open(&self.out, "uid", self.retry_failed)?;
+        let what = format!("run {} / {} / budget {}", self.planner, space_name, self.budget.label());
+        Ok(drive(&what, None, None, objects, out, &existing, self.threads, work, progress)?)
+    }
+}
+
+/// A budgeted-plan planner needs a fixed budget.
+pub fn check_budget(name: &str, planner: &dyn Planner, budget: Budget) -> Result<(), RunError> {
+    if planner.execution_mode() == ExecutionMode::BudgetedPlan && budget == Budget::Auto {
+        return Err(RunError::Invalid(format!(
+            "--planner {name} is a budgeted plan: give a fixed --budget K (e.g. 5 or 30), not auto"
+        )));
+    }
+    Ok(())
+}
+
+/// The progress note of an episode: `7 views, NSC@0.02 0.912, SC@0.02 0.871, path 9.42,
+/// plan_end (algorithm_stop)` (at its terminal checkpoint).
+pub fn episode_note(res: &EpisodeResult) -> String {
+    let source = serde_json::to_value(res.terminal_source)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_string))
+        .unwrap_or_default();
+    match res.checkpoints.get(objview_episode::result::TERMINAL_CHECKPOINT) {
+        Some(t) => format!(
+            "{} views, NSC@0.02 {:.3}, SC@0.02 {:.3}, path {:.2}, {} ({source})",
+            t.metrics.views,
+            t.metrics.nsc.get("0.02").copied().unwrap_or(f64::NAN),
+            t.metrics.sc.get("0.02").copied().unwrap_or(f64::NAN),
+            t.metrics.path_cost,
+            res.terminal_reason,
+        ),
+        None => format!("{} ({source})", res.terminal_reason),
+    }
+}
+
+/// The batch item of a finished episode: its line and note.
+pub fn episode_item(res: &EpisodeResult) -> ItemOutcome {
+    ItemOutcome { line: to_line(res), failed: false, note: episode_note(res) }
+}
+
+/// The failure line of an object whose episode could not run: `{"uid", <where_key>: <where>,
+/// "error", "settings"}` (`where_key` is `mesh` locally, `split` on a server).
+pub fn failure_item(
+    obj: &ObjectRef,
+    where_key: &str,
+    place: &str,
+    error: &str,
+    record: &Value,
+) -> ItemOutcome {
+    let error = error.replace('\n', " ");
+    let mut line = json!({"uid": obj.uid, "error": error, "settings": record});
+    line[where_key] = json!(place);
+    ItemOutcome { line: to_line(&line), failed: true, note: error }
+}
+
+/// Refuses to resume a results file written by a different run (planner, parameters, view
+/// space, budget, seed, candidates, start pose or episode settings), which would otherwise
+/// silently skip its objects. Lines that lack a key (remote runs' and failure lines know only
+/// part of the record) do not decide it; timings on or off do not change what an episode is.
+pub fn check_same_run(out: &Path, record: &Value) -> Result<(), RunError> {
+    let Ok(text) = std::fs::read_to_string(out) else { return Ok(()) };
+    for (i, line) in text.lines().enumerate() {
+        let Ok(v) = serde_json::from_str::<Value>(line) else { continue };
+        let old = &v["settings"];
+        for key in [
+            "planner",
+            "planner_params",
+            "view_space",
+            "budget",
+            "seed",
+            "candidates",
+            "start_pose",
+            "episode",
+        ] {
+            let mut a = old[key].clone();
+            let mut b = record[key].clone();
+            if a.is_null() || b.is_null() {
+                continue;
+            }
+            if key == "episode" {
+                for x in [&mut a, &mut b] {
+                    if let Some(m) = x.as_object_mut() {
+                        m.remove("record_timings");
+                    }
+                }
+            }
+            if a != b {
+                return Err(RunError::Invalid(format!(
+                    "{}:{}: this results file holds another run ({key} = {a} here, {b} now); use another --out",
+                    out.display(),
+                    i + 1
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn another_run_is_refused_and_timings_or_missing_keys_do_not_count() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("r.jsonl");
+        let rec = json!({"planner": "rse", "seed": 1, "episode": {"cap": 129, "record_timings": true}});
+        check_same_run(&out, &rec).unwrap(); // no file yet
+        let old = json!({"uid": "a", "settings": {"planner": "rse", "seed": 1, "episode": {"cap": 129, "record_timings": false}}});
+        let partial = json!({"uid": "b", "error": "x", "settings": {"planner": "rse"}});
+        std::fs::write(&out, format!("{old}\n{partial}\n")).unwrap();
+        check_same_run(&out, &rec).unwrap();
+        let other = json!({"planner": "rse", "seed": 2, "episode": {"cap": 129}});
+        let e = check_same_run(&out, &other).unwrap_err().to_string();
+        assert!(e.contains("r.jsonl:1: this results file holds another run (seed = 1 here, 2 now)"), "{e}");
+    }
+
+    #[test]
+    fn a_budgeted_plan_needs_a_fixed_budget() {
+        let p = objview_planners::registry::by_name("random-tsp").unwrap();
+        assert!(check_budget("random-tsp", p.as_ref(), Budget::Auto)
+            .unwrap_err()
+            .to_string()
+            .contains("fixed --budget"));
+        check_budget("random-tsp", p.as_ref(), Budget::Fixed(5)).unwrap();
+        let it = objview_planners::registry::by_name("rse").unwrap();
+        check_budget("rse", it.as_ref(), Budget::Auto).unwrap();
+    }
+}

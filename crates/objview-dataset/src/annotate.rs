@@ -180,10 +180,15 @@ impl GridViews {
 /// Wall-clock seconds per stage (see the module docs).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct StageTimings {
+    /// Reading and normalizing the mesh, seconds.
     pub load: f64,
+    /// Reading or sampling the ground-truth cloud, seconds.
     pub ground_truth: f64,
+    /// Voxelizing the cloud into S_gt, seconds.
     pub voxelize: f64,
+    /// O(v) for every view of every grid view set and Y(N), seconds.
     pub visibility: f64,
+    /// The saturation fit (N*, d_sat, r_vis), seconds.
     pub fit: f64,
     /// The exact cover, without waits for the HiGHS lock held by another object's solve.
     pub cover: f64,
@@ -195,12 +200,15 @@ pub struct StageTimings {
 /// One object's annotation: a line of `objview annotate` (field order = output order).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Annotation {
+    /// Object id (the mesh file stem, or the split file's `uid`).
     pub uid: String,
     /// The mesh file as given.
     pub mesh: String,
     /// Where the ground-truth cloud came from: a file, or `sampled(seed=…, count=…)`.
     pub gt_cloud: String,
+    /// Vertex positions of the mesh as loaded.
     pub vertices: usize,
+    /// Triangles of the mesh as loaded.
     pub faces: usize,
     /// Ground-truth cloud size.
     pub gt_points: usize,
@@ -208,7 +216,9 @@ pub struct Annotation {
     pub surface_voxels: usize,
     /// Raw saturation curve [[N, Y(N)], …] over the grid.
     pub curve: Vec<[usize; 2]>,
+    /// μ of the lognormal-CDF fit Ŷ(N) = y_max·Φ((ln N − μ)/σ).
     pub mu: f64,
+    /// σ of the lognormal-CDF fit (at least 1e-6).
     pub sigma: f64,
     /// Continuous saturation point N*.
     pub n_star: f64,
@@ -250,7 +260,9 @@ pub struct Annotation {
     pub solver_seconds: f64,
     /// Total wall-clock time of this object, seconds.
     pub seconds: f64,
+    /// Wall-clock seconds per pipeline stage.
     pub timings: StageTimings,
+    /// The settings block ([`AnnotateSettings::to_json`]).
     pub settings: Value,
     /// objview version.
     pub version: String,
@@ -259,10 +271,15 @@ pub struct Annotation {
 /// A failed object: `{"uid", "mesh", "error", …}`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Failure {
+    /// Object id.
     pub uid: String,
+    /// The mesh file as given.
     pub mesh: String,
+    /// The error message, on one line.
     pub error: String,
+    /// The settings block ([`AnnotateSettings::to_json`]).
     pub settings: Value,
+    /// objview version.
     pub version: String,
 }
 

@@ -13,13 +13,28 @@ use thiserror::Error;
 pub enum DatasetError {
     /// Reading or writing a file failed.
     #[error("{path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        /// The file being read or written.
+        path: PathBuf,
+        /// The operating system's error.
+        source: std::io::Error,
+    },
     /// An input path is neither a supported mesh file, a folder nor a split file (`.json`).
     #[error("{path}: not a mesh file ({expected}), a folder or a split file (.json)")]
-    UnsupportedInput { path: PathBuf, expected: &'static str },
+    UnsupportedInput {
+        /// The input path as given.
+        path: PathBuf,
+        /// The supported mesh extensions, for the message.
+        expected: &'static str,
+    },
     /// A split file is not a JSON array of objects with the required fields.
     #[error("{}: {}", .path.display(), one_line(.reason))]
-    SplitFile { path: PathBuf, reason: String },
+    SplitFile {
+        /// The split file.
+        path: PathBuf,
+        /// What is wrong with it (which entry or field).
+        reason: String,
+    },
     /// Two inputs resolve to the same object id.
     #[error(
         "duplicate object id '{}': {} and {}",
@@ -27,7 +42,14 @@ pub enum DatasetError {
         one_line(&.first.display().to_string()),
         one_line(&.second.display().to_string())
     )]
-    DuplicateUid { uid: String, first: PathBuf, second: PathBuf },
+    DuplicateUid {
+        /// The object id both inputs resolve to.
+        uid: String,
+        /// The mesh file of the first input with this id.
+        first: PathBuf,
+        /// The mesh file of the second input with this id.
+        second: PathBuf,
+    },
     /// A `--shard I/N` argument is malformed.
     #[error("invalid shard '{0}': expected I/N with 0 <= I < N (e.g. 0/4)")]
     Shard(String),
@@ -37,7 +59,14 @@ pub enum DatasetError {
         .path.display(),
         one_line(.reason)
     )]
-    CorruptLine { path: PathBuf, line: usize, reason: String },
+    CorruptLine {
+        /// The results file.
+        path: PathBuf,
+        /// The offending line, counted from 1.
+        line: usize,
+        /// Why the line is unusable (not JSON, no key field, ...).
+        reason: String,
+    },
     /// `--gt-cloud-dir` has no cloud for this object.
     #[error(
         "no ground-truth cloud for '{}' in {} (looked for {}.pcd, .ply, .npy, .npz)",
@@ -45,10 +74,20 @@ pub enum DatasetError {
         .dir.display(),
         one_line(.uid)
     )]
-    MissingGtCloud { uid: String, dir: PathBuf },
+    MissingGtCloud {
+        /// The object id whose cloud file was looked for.
+        uid: String,
+        /// The `--gt-cloud-dir` folder searched.
+        dir: PathBuf,
+    },
     /// A setting is out of range.
     #[error("invalid setting {name}: {reason}")]
-    InvalidSetting { name: &'static str, reason: String },
+    InvalidSetting {
+        /// The setting, as the command line spells it (e.g. `--threads`).
+        name: &'static str,
+        /// Why its value is rejected.
+        reason: String,
+    },
     /// Geometry (mesh or cloud loading, normalization).
     #[error(transparent)]
     Geom(#[from] objview_geom::GeomError),
@@ -57,10 +96,20 @@ pub enum DatasetError {
     Views(#[from] objview_views::ViewsError),
     /// Voxelization.
     #[error("{path}: {source}")]
-    Voxel { path: PathBuf, source: objview_voxel::VoxelError },
+    Voxel {
+        /// The mesh file of the object whose cloud was voxelized.
+        path: PathBuf,
+        /// The voxelization error.
+        source: objview_voxel::VoxelError,
+    },
     /// Saturation fit or cover.
     #[error("{path}: {source}")]
-    Difficulty { path: PathBuf, source: objview_difficulty::DifficultyError },
+    Difficulty {
+        /// The mesh file of the object being annotated.
+        path: PathBuf,
+        /// The saturation-fit or cover error.
+        source: objview_difficulty::DifficultyError,
+    },
 }
 
 /// Control characters (a newline in a JSON key, an id or a path read from a file) are shown

@@ -175,7 +175,9 @@ fn type_name(v: &Value) -> &'static str {
 /// `--shard I/N`: the I-th of N disjoint parts of a batch (0 ≤ I < N).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Shard {
+    /// Which part this is, I (0-based, less than `count`).
     pub index: u64,
+    /// Number of parts, N (at least 1).
     pub count: u64,
 }
 

@@ -77,6 +77,7 @@ impl Class {
 /// The outcome of one case.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Outcome {
+    /// How the case ended.
     pub class: Class,
     /// One line: the object summary, error, panic message, signal, …
     pub detail: String,
@@ -95,6 +96,7 @@ impl Outcome {
 pub struct Executor {
     /// The `objview-fuzz` binary.
     pub exe: PathBuf,
+    /// Time and memory limits of every case.
     pub limits: Limits,
     /// A private folder for the case lists and the child's stderr.
     pub work: PathBuf,

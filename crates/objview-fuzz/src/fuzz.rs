@@ -33,11 +33,13 @@ use crate::mutate::make_case;
 pub struct Settings {
     /// The `objview-fuzz` binary (re-executed for every child).
     pub exe: PathBuf,
+    /// Seed of the case sequence of every kind ([`make_case`]).
     pub seed: u64,
     /// Wall-clock budget of the whole campaign, shared equally by the kinds.
     pub seconds: f64,
     /// At most this many cases per kind (the seeded sequence's first cases).
     pub max_cases: Option<u64>,
+    /// The kinds to fuzz, in run order.
     pub kinds: Vec<Kind>,
     /// Where findings are written (nothing is written without it).
     pub out: Option<PathBuf>,
@@ -45,6 +47,7 @@ pub struct Settings {
     pub jobs: usize,
     /// Cases per child process.
     pub batch: usize,
+    /// Time and memory limits of every case.
     pub limits: Limits,
     /// Shrink findings before writing them.
     pub minimize: bool,
@@ -107,11 +110,15 @@ impl Settings {
 /// Counts of one kind.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct KindStats {
+    /// Cases run.
     pub cases: u64,
+    /// Cases that loaded a valid object.
     pub ok: u64,
+    /// Cases that ended in one clean error.
     pub errors: u64,
     /// Cases with a finding (duplicates included).
     pub findings: u64,
+    /// Wall time spent on the kind, seconds.
     pub seconds: f64,
 }
 
@@ -129,12 +136,17 @@ impl KindStats {
 /// One distinct defect.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Finding {
+    /// The input kind whose loader misbehaved.
     pub kind: Kind,
+    /// The campaign seed of the case sequence.
     pub seed: u64,
     /// Case number in the seeded sequence (reproduce with `objview-fuzz gen`).
     pub case: u64,
+    /// How the case ended (panic, abort, timeout, oom or invalid object).
     pub class: Class,
+    /// One line: the panic message, signal, reason, …
     pub detail: String,
+    /// What identifies the defect for de-duplication: the panic location, the signal, …
     pub signature: String,
     /// Where the (shrunk) input was written.
     pub file: Option<PathBuf>,
@@ -145,6 +157,7 @@ pub struct Finding {
 /// What a campaign did.
 #[derive(Debug, Clone, Default)]
 pub struct Summary {
+    /// Counts per kind, in run order.
     pub kinds: Vec<(Kind, KindStats)>,
     /// Distinct findings (the first few inputs of each signature).
     pub findings: Vec<Finding>,
@@ -445,9 +458,11 @@ pub fn minimize(
 /// One regression input and its outcome.
 #[derive(Debug, Clone)]
 pub struct Replayed {
+    /// The kind (the regression's folder name).
     pub kind: Kind,
     /// The file or case folder under the regression folder.
     pub path: PathBuf,
+    /// How loading it ended.
     pub outcome: Outcome,
 }
 

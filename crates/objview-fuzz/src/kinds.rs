@@ -20,26 +20,48 @@ use objview_geom::Mesh;
 /// An input kind (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Kind {
+    /// Wavefront OBJ mesh (`.obj`), through `load_mesh`.
     Obj,
+    /// PLY mesh, ascii or binary (`.ply`), through `load_mesh`.
     Ply,
+    /// STL mesh, ascii or binary (`.stl`), through `load_mesh`.
     Stl,
+    /// OFF mesh (`.off`), through `load_mesh`.
     Off,
+    /// glTF JSON mesh (`.gltf`), through `load_mesh`.
     Gltf,
+    /// Binary glTF mesh (`.glb`), through `load_mesh`.
     Glb,
+    /// PCD point cloud, ascii or binary (`.pcd`), through `read_cloud`.
     Pcd,
+    /// PLY point cloud (`.ply`), through `read_cloud`.
     CloudPly,
+    /// NumPy array cloud (`.npy`), through `read_cloud` and `read_npy_f64`.
     Npy,
+    /// NumPy zip archive cloud (`.npz`), through `read_cloud`.
     Npz,
+    /// View-set file, one `x y z` direction per line (`.txt`), through `ViewSet::load`.
     ViewSet,
+    /// Feasibility rule file of a view space (`.json`), through `ViewSpace::load`.
     Rules,
+    /// Split file (`.json`), through `resolve_inputs`, plus the meshes and clouds it names.
     Split,
+    /// Annotation results (`.jsonl`), through `read_annotations`.
     Annotations,
+    /// A results file reopened for resuming (`.jsonl`), through `ResumableJsonl::open`.
     Resume,
+    /// Episode result lines (`.jsonl`), through `objview_report::load::load_results`.
     Results,
+    /// Test kind: always panics.
     TestPanic,
+    /// Test kind: always aborts the process.
     TestAbort,
+    /// Test kind: never returns.
     TestHang,
+    /// Test kind: allocates memory without bound.
     TestOom,
+    /// Test kind: the behaviour is chosen by the file's first byte (ok, error, caught panic,
+    /// panic, abort, unbounded memory, hang, or a failed 1 TiB reservation).
     TestMixed,
 }
 

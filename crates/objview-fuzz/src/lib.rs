@@ -12,8 +12,8 @@
 //! - [`mutate`]: the seeded mutations (case `i` of a seed is always the same bytes);
 //! - [`child`]: the child process that runs cases and reports each outcome as it goes;
 //! - [`exec`]: the parent side (limits, batching, crash isolation, classification);
-//! - [`fuzz`]: campaigns (time budget, parallel children, de-duplication, shrinking, writing
-//!   findings) and the replay of kept regression files;
+//! - [`fuzz`](mod@fuzz): campaigns (time budget, parallel children, de-duplication, shrinking,
+//!   writing findings) and the replay of kept regression files;
 //! - [`rng`]: the fixed random-number stream.
 //!
 //! The binary `objview-fuzz` is the entry point (`run`, `replay`, `one`, `gen`, `list`); the

@@ -519,6 +519,7 @@ fn write_all(path: &Path, bytes: &[u8]) -> Result<(), GeomError> {
 /// A ground-truth cloud in the normalized object frame and where it came from.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GroundTruth {
+    /// The surface points, normalized object frame.
     pub points: Vec<[f64; 3]>,
     /// The file it was read from, or `sampled(seed=…, count=…)`.
     pub source: String,

@@ -11,28 +11,48 @@ pub enum GeomError {
     /// The file could not be opened, read or written.
     #[error("{}: {}", one_line(&path.display().to_string()), one_line(&source.to_string()))]
     Io {
+        /// The file being opened, read or written.
         path: PathBuf,
+        /// The operating system's error.
         #[source]
         source: std::io::Error,
     },
     /// The file was read but its content is malformed for its format.
     #[error("{}: {}", one_line(&path.display().to_string()), one_line(reason))]
-    Parse { path: PathBuf, reason: String },
+    Parse {
+        /// The malformed file.
+        path: PathBuf,
+        /// What is wrong with its content (one line once escaped).
+        reason: String,
+    },
     /// The file parsed, but the geometry is unusable (no faces, NaN, zero extent, ...).
     #[error("{}: {}", one_line(&path.display().to_string()), one_line(reason))]
-    Invalid { path: PathBuf, reason: String },
+    Invalid {
+        /// The file whose geometry is unusable.
+        path: PathBuf,
+        /// Why the geometry is unusable (no faces, NaN, zero extent, ...).
+        reason: String,
+    },
     /// The file extension is not a supported format.
     #[error("{}: unsupported format (expected one of {expected})", one_line(&path.display().to_string()))]
-    Unsupported { path: PathBuf, expected: &'static str },
+    Unsupported {
+        /// The file whose extension is not recognized.
+        path: PathBuf,
+        /// The supported extensions, for the message (e.g. "obj, ply, stl").
+        expected: &'static str,
+    },
 }
 
 impl GeomError {
+    /// A [`GeomError::Io`] error: opening, reading or writing `path` failed with `source`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         GeomError::Io { path: path.into(), source }
     }
+    /// A [`GeomError::Parse`] error: `path` is malformed for its format, because of `reason`.
     pub fn parse(path: impl Into<PathBuf>, reason: impl Into<String>) -> Self {
         GeomError::Parse { path: path.into(), reason: reason.into() }
     }
+    /// A [`GeomError::Invalid`] error: the geometry of `path` is unusable, because of `reason`.
     pub fn invalid(path: impl Into<PathBuf>, reason: impl Into<String>) -> Self {
         GeomError::Invalid { path: path.into(), reason: reason.into() }
     }

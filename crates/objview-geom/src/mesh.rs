@@ -9,15 +9,20 @@ use std::path::Path;
 /// by the loader, which stores UVs so that `(u, v)` maps to pixel `(u·w, v·h)` from the top-left).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Texture {
+    /// Width of the image, pixels.
     pub width: u32,
+    /// Height of the image, pixels.
     pub height: u32,
+    /// `width × height` texels, row-major from the top-left, 8-bit RGB (used as is, scaled to 0..1).
     pub rgb: Vec<[u8; 3]>,
 }
 
 /// Per-triangle material of a textured mesh: a base colour (linear 0..1) and optional texture.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Material {
+    /// Base colour, linear RGB in 0..1; multiplies the texel colour when there is a texture.
     pub base_color: [f32; 3],
+    /// Index into the mesh's `textures`, or `None` for a plain base colour.
     pub texture: Option<usize>,
 }
 
@@ -33,9 +38,14 @@ pub enum Appearance {
     FaceColors(Vec<[f32; 3]>),
     /// Texture-mapped: per-triangle corner UVs and material index.
     Textured {
+        /// Per triangle, the `(u, v)` texture coordinates of its three corners (repeat-wrapped;
+        /// `(0, 0)` is the top-left of the image).
         corner_uvs: Vec<[[f32; 2]; 3]>,
+        /// Per triangle, its index into `materials`.
         face_material: Vec<u32>,
+        /// The mesh's materials.
         materials: Vec<Material>,
+        /// The decoded texture images that `Material::texture` indexes.
         textures: Vec<Texture>,
     },
 }

@@ -49,7 +49,9 @@ impl fmt::Display for Normalization {
 /// The similarity applied by [`normalize`]: `p' = (p − center) · scale`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Transform {
+    /// The point moved to the origin (centre of the vertex AABB for `unit`), file frame.
     pub center: [f64; 3],
+    /// Uniform scale factor applied after centring (normalized units per file unit).
     pub scale: f64,
 }
 

@@ -64,7 +64,9 @@ pub fn palette(i: usize) -> Rgb {
 /// One axis: its label (name and unit), scale, optional fixed range and optional fixed ticks.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Axis {
+    /// Axis title: the quantity's name and unit.
     pub label: String,
+    /// Linear or base-10 logarithmic.
     pub scale: Scale,
     /// Drawn range; `None`: the data range, padded.
     pub range: Option<(f64, f64)>,
@@ -75,24 +77,29 @@ pub struct Axis {
 }
 
 impl Axis {
+    /// A linear axis titled `label`, data range, computed ticks.
     pub fn linear(label: impl Into<String>) -> Self {
         Axis { label: label.into(), scale: Scale::Linear, range: None, ticks: None, integer: false }
     }
 
+    /// A base-10 logarithmic axis titled `label`, data range, computed ticks.
     pub fn log(label: impl Into<String>) -> Self {
         Axis { label: label.into(), scale: Scale::Log, range: None, ticks: None, integer: false }
     }
 
+    /// The axis with the fixed drawn range `lo..hi` (data units) instead of the padded data range.
     pub fn with_range(mut self, lo: f64, hi: f64) -> Self {
         self.range = Some((lo, hi));
         self
     }
 
+    /// The axis with these ticks (position in data units, label) instead of computed ones.
     pub fn with_ticks(mut self, ticks: Vec<(f64, String)>) -> Self {
         self.ticks = Some(ticks);
         self
     }
 
+    /// The axis with computed ticks only at whole numbers.
     pub fn with_integer_ticks(mut self) -> Self {
         self.integer = true;
         self
@@ -103,10 +110,15 @@ impl Axis {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Marker {
+    /// No marker (a line only).
     None,
+    /// Filled circle of radius `marker_size`.
     Circle,
+    /// Filled square of half-side `marker_size`.
     Square,
+    /// Filled triangle of size `marker_size + 1`.
     Triangle,
+    /// Cross of size `marker_size`, 2 px strokes.
     Cross,
 }
 
@@ -114,8 +126,11 @@ pub enum Marker {
 /// seeded generator (SplitMix64 of `seed` and `i`), so the same chart gives the same picture.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Jitter {
+    /// Largest horizontal offset, ± data units (at least 0).
     pub dx: f64,
+    /// Largest vertical offset, ± data units (at least 0).
     pub dy: f64,
+    /// Seed of the offsets.
     pub seed: u64,
 }
 
@@ -133,11 +148,15 @@ impl Jitter {
 pub struct Series {
     /// Legend text; empty: not in the legend.
     pub name: String,
+    /// The (x, y) points in data units, in drawing order (all finite).
     pub points: Vec<(f64, f64)>,
+    /// Colour of the line and markers.
     pub color: Rgb,
     /// Line width in pixels; 0: no line.
     pub line_width: u32,
+    /// Draw the line dashed (8 px on, 5 px off) instead of solid.
     pub dashed: bool,
+    /// Marker drawn at every point.
     pub marker: Marker,
     /// Marker radius in pixels.
     pub marker_size: u32,
@@ -145,6 +164,7 @@ pub struct Series {
     pub alpha: f64,
     /// Empty, or one text per point, drawn next to it.
     pub labels: Vec<String>,
+    /// Deterministic offsets applied to the drawn points; `None`: drawn where they are.
     pub jitter: Option<Jitter>,
 }
 
@@ -170,32 +190,38 @@ impl Series {
         Series { line_width: 0, marker, marker_size: 4, ..Series::line(name, points, color) }
     }
 
+    /// The series with markers of this shape and size (pixels).
     pub fn with_marker(mut self, marker: Marker, size: u32) -> Self {
         self.marker = marker;
         self.marker_size = size;
         self
     }
 
+    /// The series with a line `width` pixels wide (0: no line).
     pub fn with_width(mut self, width: u32) -> Self {
         self.line_width = width;
         self
     }
 
+    /// The series with a dashed line.
     pub fn with_dashes(mut self) -> Self {
         self.dashed = true;
         self
     }
 
+    /// The series with opacity `alpha` in [0, 1].
     pub fn with_alpha(mut self, alpha: f64) -> Self {
         self.alpha = alpha;
         self
     }
 
+    /// The series with one text label per point (empty strings draw nothing).
     pub fn with_labels(mut self, labels: Vec<String>) -> Self {
         self.labels = labels;
         self
     }
 
+    /// The series with its points drawn moved by `jitter`.
     pub fn with_jitter(mut self, jitter: Jitter) -> Self {
         self.jitter = Some(jitter);
         self
@@ -221,9 +247,13 @@ impl Series {
 /// A filled rectangle from (x0, y0) to (x1, y1) in data units.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Bar {
+    /// Left edge, data units.
     pub x0: f64,
+    /// Right edge, data units.
     pub x1: f64,
+    /// Bottom edge, data units.
     pub y0: f64,
+    /// Top edge, data units.
     pub y1: f64,
 }
 
@@ -232,12 +262,16 @@ pub struct Bar {
 pub struct BarSeries {
     /// Legend text; empty: not in the legend.
     pub name: String,
+    /// Fill colour of every bar.
     pub color: Rgb,
+    /// Fill opacity in [0, 1].
     pub alpha: f64,
+    /// The rectangles, drawn with a 1 px white edge.
     pub bars: Vec<Bar>,
 }
 
 impl BarSeries {
+    /// Bars named `name` (legend text) in `color`, at opacity 0.85.
     pub fn new(name: impl Into<String>, color: Rgb, bars: Vec<Bar>) -> Self {
         BarSeries { name: name.into(), color, alpha: 0.85, bars }
     }
@@ -275,21 +309,28 @@ pub enum Orientation {
 /// A dashed line across the plot at a fixed x or y, explained in the legend.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RefLine {
+    /// Vertical (x = `at`) or horizontal (y = `at`).
     pub orientation: Orientation,
+    /// Where the line crosses its axis, data units.
     pub at: f64,
+    /// Legend text.
     pub label: String,
+    /// Line colour (drawn at 0.9 opacity).
     pub color: Rgb,
 }
 
 impl RefLine {
+    /// A black vertical line at x = `at`, explained by `label`.
     pub fn vertical(at: f64, label: impl Into<String>) -> Self {
         RefLine { orientation: Orientation::Vertical, at, label: label.into(), color: INK }
     }
 
+    /// A black horizontal line at y = `at`, explained by `label`.
     pub fn horizontal(at: f64, label: impl Into<String>) -> Self {
         RefLine { orientation: Orientation::Horizontal, at, label: label.into(), color: INK }
     }
 
+    /// The line in `color`.
     pub fn with_color(mut self, color: Rgb) -> Self {
         self.color = color;
         self
@@ -301,6 +342,7 @@ impl RefLine {
 pub enum Legend {
     /// A column right of the plot (never over the data).
     Right,
+    /// No legend; the plot takes the whole panel width.
     None,
 }
 
@@ -310,17 +352,24 @@ pub type Ranges = ((f64, f64), (f64, f64));
 /// One panel.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Chart {
+    /// Panel title, drawn above the plot.
     pub title: String,
+    /// Horizontal axis.
     pub x: Axis,
+    /// Vertical axis.
     pub y: Axis,
     /// Drawn first (under the series).
     pub bars: Vec<BarSeries>,
+    /// Lines and markers, drawn last, in order.
     pub series: Vec<Series>,
+    /// Dashed reference lines, drawn between the bars and the series.
     pub ref_lines: Vec<RefLine>,
+    /// Where the legend goes.
     pub legend: Legend,
 }
 
 impl Chart {
+    /// An empty panel titled `title` with these axes and the legend on the right.
     pub fn new(title: impl Into<String>, x: Axis, y: Axis) -> Self {
         Chart {
             title: title.into(),
@@ -333,21 +382,25 @@ impl Chart {
         }
     }
 
+    /// The chart with `s` added on top of the other series.
     pub fn with_series(mut self, s: Series) -> Self {
         self.series.push(s);
         self
     }
 
+    /// The chart with the bars `b` added (on top of earlier bars).
     pub fn with_bars(mut self, b: BarSeries) -> Self {
         self.bars.push(b);
         self
     }
 
+    /// The chart with the reference line `r` added.
     pub fn with_ref_line(mut self, r: RefLine) -> Self {
         self.ref_lines.push(r);
         self
     }
 
+    /// The chart with its legend placed as `legend`.
     pub fn with_legend(mut self, legend: Legend) -> Self {
         self.legend = legend;
         self
@@ -453,11 +506,13 @@ impl Chart {
 /// Panels in a grid, with an optional caption under them, drawn to PNG and SVG.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Figure {
-    /// Size in pixels (PNG) and SVG user units.
+    /// Width in pixels (PNG) and SVG user units.
     pub width: u32,
+    /// Height in pixels (PNG) and SVG user units.
     pub height: u32,
     /// Panels per row.
     pub columns: usize,
+    /// The panels, row by row.
     pub panels: Vec<Chart>,
     /// A note under the panels (what is left out, how to read it).
     pub caption: Option<String>,
@@ -491,6 +546,7 @@ impl Figure {
         Figure { width, height, columns, panels, caption: None }
     }
 
+    /// The figure with `caption` under the panels (word-wrapped; `\n` starts a paragraph).
     pub fn with_caption(mut self, caption: impl Into<String>) -> Self {
         self.caption = Some(caption.into());
         self

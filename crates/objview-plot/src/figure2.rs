@@ -69,6 +69,7 @@ impl Default for Figure2Settings {
 }
 
 impl Figure2Settings {
+    /// Checks every setting's range; an error names the first bad setting.
     pub fn validate(&self) -> Result<(), PlotError> {
         let bad =
             |name: &'static str, reason: &str| Err(PlotError::InvalidSetting { name, reason: reason.into() });
@@ -130,7 +131,9 @@ pub fn normalized_curve(a: &Annotation) -> Vec<(f64, f64)> {
 /// Marginal gain between two consecutive grid sizes.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Gain {
+    /// Smaller grid size N of the interval (view count).
     pub n0: usize,
+    /// Larger grid size N of the interval (view count).
     pub n1: usize,
     /// Where it is plotted: (n0 + n1) / 2.
     pub x: f64,
@@ -165,6 +168,7 @@ pub fn marginal_gain(a: &Annotation) -> Vec<Gain> {
 pub struct Bucket {
     /// Smallest and largest d_plan of the bucket (inclusive).
     pub lo: usize,
+    /// Largest d_plan of the bucket (inclusive).
     pub hi: usize,
     /// Main-pool objects (d_sat ≤ threshold).
     pub main: usize,

@@ -9,6 +9,7 @@ use serde::Serialize;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Scale {
+    /// Linear, with 1-2-5 tick steps.
     Linear,
     /// Base-10 logarithmic; non-positive values are drawn at the axis minimum.
     Log,

@@ -242,7 +242,9 @@ impl RejectReason {
 /// Why one object was rejected: the reason and a message naming the file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Rejection {
+    /// The rejection class (recorded as [`RejectReason::as_str`]).
     pub reason: RejectReason,
+    /// The one-line message, naming the file.
     pub detail: String,
 }
 
@@ -309,6 +311,7 @@ pub struct Prepared {
     pub points: Vec<[f64; 3]>,
     /// Where it came from: a file, or `sampled(seed=…, count=…)`.
     pub gt_source: String,
+    /// Stratification statistics of the object.
     pub stats: ObjectStats,
 }
 
@@ -407,15 +410,18 @@ pub fn prepare_object(
 /// The normalization applied to an accepted object.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct NormalizationRecord {
+    /// The normalization mode, `unit` or `none`.
     pub mode: String,
-    /// `p' = (p − center) · scale`.
+    /// `p' = (p − center) · scale`: the point moved to the origin, source file frame.
     pub center: [f64; 3],
+    /// Uniform scale factor applied after centring (normalized units per file unit).
     pub scale: f64,
 }
 
 /// The `build.jsonl` line of an accepted object.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Accepted {
+    /// Object id (the source file stem, or the split file's `uid`).
     pub uid: String,
     /// The source mesh file as given.
     pub source: String,
@@ -425,29 +431,39 @@ pub struct Accepted {
     pub gt_cloud: String,
     /// Where the cloud came from: a file, or `sampled(seed=…, count=…)`.
     pub gt_source: String,
+    /// The normalization that maps the source mesh to the pool's mesh.
     pub normalization: NormalizationRecord,
+    /// Stratification statistics of the normalized object.
     pub stats: ObjectStats,
+    /// The build's settings block ([`BuildSettings::to_json`]).
     pub settings: Value,
+    /// objview version.
     pub version: String,
 }
 
 /// The `build.jsonl` line of a rejected object (a failure line: it has `error`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Rejected {
+    /// Object id.
     pub uid: String,
+    /// The source mesh file as given.
     pub source: String,
     /// [`RejectReason::as_str`].
     pub reason: String,
     /// The message, naming the file.
     pub error: String,
+    /// The build's settings block ([`BuildSettings::to_json`]).
     pub settings: Value,
+    /// objview version.
     pub version: String,
 }
 
 /// One object's outcome.
 #[derive(Debug, Clone, PartialEq)]
 pub enum BuildRecord {
+    /// The object passed every filter and was written to the pool.
     Accepted(Accepted),
+    /// The object was rejected, with its reason.
     Rejected(Rejected),
 }
 
@@ -634,11 +650,17 @@ pub fn run_build(
 /// Quantiles of one statistic over the accepted objects.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct StatSummary {
+    /// The statistic's name (an [`ObjectStats`] field, see [`STAT_FIELDS`]).
     pub name: String,
+    /// Smallest value.
     pub min: f64,
+    /// First quartile ([`quantile`] 0.25).
     pub q25: f64,
+    /// Median ([`quantile`] 0.5).
     pub median: f64,
+    /// Third quartile ([`quantile`] 0.75).
     pub q75: f64,
+    /// Largest value.
     pub max: f64,
 }
 
@@ -679,13 +701,17 @@ pub fn summarize(stats: &[&ObjectStats]) -> Vec<StatSummary> {
 /// What a finished build holds (every line of the log, sorted by uid).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Manifest {
+    /// Lines of the accepted objects, sorted by uid.
     pub accepted: Vec<Accepted>,
+    /// Lines of the rejected objects, sorted by uid.
     pub rejected: Vec<Rejected>,
     /// Rejections per reason (reason names).
     pub reasons: BTreeMap<String, usize>,
+    /// Quantiles of every [`STAT_FIELDS`] statistic over the accepted objects.
     pub summary: Vec<StatSummary>,
-    /// Where `manifest.json` and `pool.json` were written.
+    /// Where `manifest.json` was written (in the pool folder).
     pub manifest_path: PathBuf,
+    /// Where `pool.json` (the split file of the accepted objects) was written.
     pub pool_path: PathBuf,
 }
 

@@ -15,17 +15,29 @@ pub enum PoolError {
     /// Reading or writing a file failed.
     #[error("{}: {source}", path.display())]
     Io {
+        /// The file being read or written.
         path: PathBuf,
+        /// The operating system's error.
         #[source]
         source: std::io::Error,
     },
     /// A setting is out of range.
     #[error("invalid setting {name}: {reason}")]
-    InvalidSetting { name: &'static str, reason: String },
+    InvalidSetting {
+        /// The setting, as the command line spells it.
+        name: &'static str,
+        /// Why its value is rejected.
+        reason: String,
+    },
     /// A file's content does not fit what the command needs (a split file naming an object that
     /// the annotations lack, a build log written with other settings, …).
     #[error("{}: {reason}", path.display())]
-    Mismatch { path: PathBuf, reason: String },
+    Mismatch {
+        /// The file whose content does not fit.
+        path: PathBuf,
+        /// What does not match, naming the object or field.
+        reason: String,
+    },
     /// Inputs, annotation files, split files and results files of the batch layer.
     #[error(transparent)]
     Dataset(#[from] objview_dataset::DatasetError),

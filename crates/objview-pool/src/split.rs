@@ -79,10 +79,15 @@ pub fn proven_d_plan(a: &Annotation) -> Result<usize, String> {
 /// The splits written by `objview pool split`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum SplitName {
+    /// Slow-Saturation: the diagnostic split of objects with d_sat > 128.
     SlowSaturation,
+    /// Main-Hidden-Test: drawn from the main pool by the two-stage bucket rule.
     MainHiddenTest,
+    /// Main-Train-Public: the main pool less Main-Hidden-Test.
     MainTrainPublic,
+    /// Main-Raw-Train: a uniformly random subset of Main-Train-Public.
     MainRawTrain,
+    /// Main-Balanced-Train: as large as Main-Raw-Train, an equal quota per d_plan bucket.
     MainBalancedTrain,
 }
 
@@ -270,7 +275,9 @@ fn rng(seed: u64, stream: u64) -> ChaCha8Rng {
 /// A main-pool object left out of every split.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Excluded {
+    /// Object id.
     pub uid: String,
+    /// Its annotation's `d_plan_status` (e.g. `time_limit`, `error: …`, or `optimal` with d_plan 0).
     pub d_plan_status: String,
     /// Why it cannot be bucketed.
     pub reason: String,
@@ -279,10 +286,15 @@ pub struct Excluded {
 /// The splits of one set of annotations (every list sorted by uid).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Splits {
+    /// The Slow-Saturation split ([`SplitName::SlowSaturation`]).
     pub slow_saturation: Vec<Annotation>,
+    /// The Main-Hidden-Test split ([`SplitName::MainHiddenTest`]).
     pub main_hidden_test: Vec<Annotation>,
+    /// The Main-Train-Public split ([`SplitName::MainTrainPublic`]).
     pub main_train_public: Vec<Annotation>,
+    /// The Main-Raw-Train split ([`SplitName::MainRawTrain`]).
     pub main_raw_train: Vec<Annotation>,
+    /// The Main-Balanced-Train split ([`SplitName::MainBalancedTrain`]).
     pub main_balanced_train: Vec<Annotation>,
     /// Main-pool objects without a proven positive d_plan.
     pub excluded: Vec<Excluded>,

@@ -59,12 +59,17 @@ pub fn read_split_dir(dir: &Path) -> Result<Vec<SplitMembers>, PoolError> {
 /// Counts and means of one group of objects.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GroupStats {
+    /// The group: `all`, `main`, `slow_saturation`, or a split's name.
     pub name: String,
+    /// Objects in the group.
     pub count: usize,
     /// Objects with a proven positive d_plan (the d_plan mean is over these).
     pub with_d_plan: usize,
+    /// Mean d_sat over the group's objects; `None` for an empty group.
     pub mean_d_sat: Option<f64>,
+    /// Mean d_plan over the objects with a proven positive d_plan; `None` if there are none.
     pub mean_d_plan: Option<f64>,
+    /// Mean r_vis over the group's objects; `None` for an empty group.
     pub mean_r_vis: Option<f64>,
     /// Objects per d_plan bucket ([`PoolStats::buckets`] entries).
     pub buckets: Vec<usize>,

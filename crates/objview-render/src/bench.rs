@@ -25,12 +25,17 @@ pub struct TimingStats {
 /// Result of [`bench_render`].
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct RenderBenchResult {
+    /// Triangles of the benchmarked mesh.
     pub triangles: usize,
+    /// Vertex positions of the benchmarked mesh.
     pub vertices: usize,
+    /// Image width, pixels (default intrinsics).
     pub width: u32,
+    /// Image height, pixels (default intrinsics).
     pub height: u32,
     /// Number of poses; every repeat renders each pose once with each variant.
     pub poses: usize,
+    /// Timed passes over all poses (after one untimed warm-up pass).
     pub repeats: usize,
     /// Threads of the rayon pool used by the parallel variant.
     pub threads: usize,

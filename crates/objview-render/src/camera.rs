@@ -16,13 +16,21 @@ use objview_geom::Pose;
 /// Serialized with these field names (results, sidecars, the server's observations).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Intrinsics {
+    /// Image width, pixels.
     pub width: u32,
+    /// Image height, pixels.
     pub height: u32,
+    /// Horizontal focal length, pixels.
     pub fx: f64,
+    /// Vertical focal length, pixels.
     pub fy: f64,
+    /// Principal point, horizontal image coordinate, pixels from the left edge.
     pub cx: f64,
+    /// Principal point, vertical image coordinate, pixels from the top edge.
     pub cy: f64,
+    /// Near clipping distance along the camera z axis, object units.
     pub znear: f64,
+    /// Far clipping distance along the camera z axis, object units.
     pub zfar: f64,
 }
 
@@ -90,7 +98,9 @@ impl Intrinsics {
 /// A posed camera: centre and orthonormal axes (right, down, forward) in the object frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Camera {
+    /// The pinhole intrinsics (image size, focal lengths, principal point, clipping).
     pub intrinsics: Intrinsics,
+    /// The pose the camera was built from (object frame, roll in radians).
     pub pose: Pose,
     /// Camera centre, object frame.
     pub center: [f64; 3],

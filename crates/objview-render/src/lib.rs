@@ -2,8 +2,8 @@
 //!
 //! - [`camera`]: intrinsics, the pose → camera-axes rule (pole rule, roll), projection and
 //!   pixel-centre rays.
-//! - [`reference`]: brute-force per-pixel ray–triangle casting. Slow, obviously correct; the
-//!   oracle the fast renderer is tested against.
+//! - [`reference`](mod@reference): brute-force per-pixel ray–triangle casting. Slow, obviously
+//!   correct; the oracle the fast renderer is tested against.
 //! - [`frame`]: a rendered view (depth, triangle ids) and what is derived from it
 //!   (observed point cloud, RGB).
 

@@ -9,10 +9,26 @@ use std::path::{Path, PathBuf};
 /// Failure to write a preview image.
 #[derive(Debug, thiserror::Error)]
 pub enum PreviewError {
+    /// Encoding or writing the PNG file failed.
     #[error("cannot write PNG {path}: {source}")]
-    Write { path: PathBuf, source: image::ImageError },
+    Write {
+        /// The PNG file being written.
+        path: PathBuf,
+        /// The encoder's or the file system's error.
+        source: image::ImageError,
+    },
+    /// The pixel buffer does not hold `width × height` pixels.
     #[error("cannot write PNG {path}: {len} pixels given for a {width}×{height} image")]
-    Size { path: PathBuf, width: u32, height: u32, len: usize },
+    Size {
+        /// The PNG file that was to be written.
+        path: PathBuf,
+        /// Requested image width, pixels.
+        width: u32,
+        /// Requested image height, pixels.
+        height: u32,
+        /// Number of pixels actually given.
+        len: usize,
+    },
 }
 
 /// Viridis (matplotlib) at t = 0, ¼, ½, ¾, 1; linearly interpolated in between.

@@ -14,8 +14,6 @@
 //! The batch driver itself (worker pool, input-order output, typed progress events) is
 //! [`objview_dataset::batch`]; each plan here makes its items and notes and hands them to it.
 
-#![warn(missing_docs)]
-
 pub mod annotate;
 pub mod cache;
 pub mod demo;

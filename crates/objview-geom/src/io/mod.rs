@@ -11,7 +11,7 @@
 //!
 //! Files are opened through [`crate::fsutil`] (regular files only, size-capped, referenced
 //! files only inside the asset's folder) and every loader stays within the
-//! [`Limits`](crate::limits::Limits) ([`load_mesh`] uses [`Limits::global`], [`load_mesh_with`]
+//! [`Limits`] ([`load_mesh`] uses [`Limits::global`], [`load_mesh_with`]
 //! explicit ones).
 
 mod gltf;

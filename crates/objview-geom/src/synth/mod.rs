@@ -28,6 +28,7 @@ use std::path::{Path, PathBuf};
 /// aims at edge length `2π / segments`, so the triangle count grows like `segments²`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct Detail {
+    /// Edge segments per full circle of radius 1 (at least [`Detail::MIN_SEGMENTS`] in effect).
     pub segments: u32,
 }
 

@@ -1,16 +1,13 @@
 //! `objview bench ...`: benchmark commands of the hot paths. They print medians per operation
 //! (and, where a peer is installed, a ratio against it measured in the same run) and can write
-//! the figures as JSON. Benchmarks are commands, never timed unit tests.
+//! the figures as JSON. Benchmarks are commands, never timed unit tests. This module holds the
+//! arguments and the printing; the measurements are [`objview_runs::bench`]'s (`bench serve`'s
+//! are [`objview_server::load`]'s).
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::{Parser, Subcommand};
-use objview_geom::cloud::{cloud_count, sample_surface, DEFAULT_CLOUD_SEED};
-use objview_geom::pose::VIEW_RADIUS;
-use objview_geom::{synth, Mesh, Pose};
-use objview_views::ViewSet;
-use serde_json::json;
+use objview_runs::bench::render::{RenderBench, RenderBenchSettings};
 use std::path::PathBuf;
-use std::process::Command as Process;
 
 #[derive(Subcommand)]
 pub enum Command {
@@ -108,20 +105,23 @@ pub fn run(cmd: Command) -> Result<()> {
 }
 
 fn bench_render(a: RenderArgs) -> Result<()> {
-    let obj = synth::find(&a.object).with_context(|| {
-        format!("--object: no built-in object named {:?} (see `objview objects list`)", a.object)
+    let bench = RenderBench::new(RenderBenchSettings {
+        object: a.object.clone(),
+        sizes: a.sizes.clone(),
+        poses: a.poses,
+        repeats: a.repeats,
+        visibility_triangles: a.visibility_triangles,
+        mesh_views: a.mesh_views,
+        python: (!a.no_peer).then(|| a.python.clone()),
     })?;
-    let poses: Vec<Pose> =
-        ViewSet::resolve("tammes-128")?.poses(VIEW_RADIUS).into_iter().take(a.poses.max(1)).collect();
-    let peer = if a.no_peer { None } else { open3d_available(&a.python) };
     println!(
         "objview bench render: object={} poses={} repeats={} image=512x512 threads={}",
         a.object,
-        poses.len(),
+        bench.poses(),
         a.repeats,
         rayon::current_num_threads()
     );
-    match (&peer, a.no_peer) {
+    match (bench.peer_version(), a.no_peer) {
         (Some(v), _) => println!("peer: Open3D {v} RaycastingScene (Embree), same mesh and poses"),
         (None, true) => println!("peer: skipped (--no-peer)"),
         (None, false) => {
@@ -132,15 +132,11 @@ fn bench_render(a: RenderArgs) -> Result<()> {
         "{:>10} {:>12} {:>12} {:>12} {:>10} {:>12} {:>9}",
         "triangles", "1thr_med_ms", "1thr_p90_ms", "Nthr_med_ms", "Mrays/s", "open3d_ms", "ratio"
     );
-    let mut rows = Vec::new();
-    for &size in &a.sizes {
-        let mesh = obj.build_with_triangles(size);
-        let r = objview_render::bench::bench_render(&mesh, &poses, a.repeats.max(1));
-        let peer_ms = match &peer {
-            Some(_) => run_peer(&a.python, &mesh, &poses, a.repeats.max(1))?,
-            None => None,
-        };
-        let ratio = peer_ms.map(|p| p / r.single.median_ms);
+    let report = bench.run(&mut |row| {
+        if let Some(e) = &row.peer_error {
+            eprintln!("peer failed: {e}");
+        }
+        let r = &row.render;
         println!(
             "{:>10} {:>12.3} {:>12.3} {:>12.3} {:>10.1} {:>12} {:>9}",
             r.triangles,
@@ -148,37 +144,19 @@ fn bench_render(a: RenderArgs) -> Result<()> {
             r.single.p90_ms,
             r.parallel.median_ms,
             r.single.mrays_per_s,
-            peer_ms.map_or("-".into(), |p| format!("{p:.3}")),
-            ratio.map_or("-".into(), |x| format!("{x:.2}x")),
+            row.open3d_median_ms.map_or("-".into(), |p| format!("{p:.3}")),
+            row.speedup_vs_open3d.map_or("-".into(), |x| format!("{x:.2}x")),
         );
-        anyhow::ensure!(
-            r.identical,
-            "single-thread and parallel renders differ on {} triangles",
-            r.triangles
-        );
-        rows.push(json!({"render": r, "open3d_median_ms": peer_ms, "speedup_vs_open3d": ratio}));
-    }
-    if peer.is_some() {
+    })?;
+    if bench.peer_version().is_some() {
         println!("ratio = Open3D median / objview single-thread median");
     }
-
-    let mut vis_json = serde_json::Value::Null;
-    if a.visibility_triangles > 0 {
-        let mesh = obj.build_with_triangles(a.visibility_triangles);
-        let n = cloud_count(mesh.surface_area());
-        let cloud = sample_surface(&mesh, n, DEFAULT_CLOUD_SEED);
-        let r = objview_voxel::bench::bench_visibility(
-            &mesh,
-            &cloud,
-            objview_voxel::DEFAULT_RESOLUTION,
-            &poses,
-            a.repeats.max(1),
-            a.mesh_views,
-        )?;
+    if let Some(v) = &report.visibility {
+        let r = &v.bench;
         println!(
             "visibility O(v), one thread: triangles={} gt_points={} surface_voxels={} (S_gt build {:.2} ms, inverse setup {:.2} ms)",
-            mesh.num_triangles(),
-            cloud.len(),
+            v.triangles,
+            v.gt_points,
             r.voxels,
             r.set_build_ms,
             r.caster_build_ms
@@ -190,69 +168,9 @@ fn bench_render(a: RenderArgs) -> Result<()> {
         if let (Some(m), Some(o)) = (r.mesh_median_ms, r.mesh_mean_observed) {
             println!("  mesh:    median {m:.3} ms/view (render included), mean |O(v)| {o:.0}");
         }
-        vis_json = json!({
-            "triangles": mesh.num_triangles(),
-            "gt_points": cloud.len(),
-            "surface_voxels": r.voxels,
-            "set_build_ms": r.set_build_ms,
-            "inverse_setup_ms": r.caster_build_ms,
-            "inverse_median_ms": r.inverse_median_ms,
-            "inverse_min_ms": r.inverse_min_ms,
-            "mesh_median_ms": r.mesh_median_ms,
-        });
     }
     if let Some(p) = &a.json {
-        let v = json!({
-            "settings": objview_runs::provenance::settings("bench render", json!({
-                "object": a.object, "sizes": a.sizes, "poses": poses.len(), "repeats": a.repeats,
-                "threads": rayon::current_num_threads(),
-            })),
-            "render": rows,
-            "visibility": vis_json,
-        });
-        crate::common::write_json(p, &v)?;
+        crate::common::write_json(p, &report.to_json())?;
     }
     Ok(())
-}
-
-/// Open3D's version if `python -c "import open3d"` works.
-fn open3d_available(python: &str) -> Option<String> {
-    let out = Process::new(python).args(["-c", "import open3d; print(open3d.__version__)"]).output().ok()?;
-    out.status.success().then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
-}
-
-/// Runs `bench/peer_open3d.py` on `mesh` and `poses`; its median ms per frame.
-fn run_peer(python: &str, mesh: &Mesh, poses: &[Pose], repeats: usize) -> Result<Option<f64>> {
-    let script = peer_script()?;
-    let dir = tempfile::tempdir()?;
-    let mesh_path = dir.path().join("mesh.ply");
-    objview_geom::write::write_ply(&mesh_path, mesh)?;
-    let poses_path = dir.path().join("poses.txt");
-    let text: String = poses
-        .iter()
-        .map(|p| p.to_array().iter().map(|x| format!("{x:?}")).collect::<Vec<_>>().join(" ") + "\n")
-        .collect();
-    std::fs::write(&poses_path, text)?;
-    let out = Process::new(python)
-        .arg(&script)
-        .arg(&mesh_path)
-        .arg(&poses_path)
-        .arg("--repeats")
-        .arg(repeats.to_string())
-        .output()
-        .with_context(|| format!("running {}", script.display()))?;
-    if !out.status.success() {
-        eprintln!("peer failed: {}", String::from_utf8_lossy(&out.stderr).trim());
-        return Ok(None);
-    }
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout)
-        .with_context(|| format!("parsing the output of {}", script.display()))?;
-    Ok(v["median_ms"].as_f64())
-}
-
-/// `bench/peer_open3d.py` beside the workspace this binary was built from.
-fn peer_script() -> Result<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../bench/peer_open3d.py");
-    anyhow::ensure!(p.exists(), "peer script {} not found", p.display());
-    Ok(p)
 }

@@ -10,11 +10,14 @@
 //! - [`record`]: the settings record every episode result carries (shared with the server);
 //!   [`provenance`]: the settings block of every other output file.
 //! - [`params`]: `NAME=VALUE` planner parameters; [`cache`]: cache locations.
+//! - [`bench`]: the measurement procedures of `objview bench …` (episode step, annotation,
+//!   rendering).
 //!
 //! The batch driver itself (worker pool, input-order output, typed progress events) is
 //! [`objview_dataset::batch`]; each plan here makes its items and notes and hands them to it.
 
 pub mod annotate;
+pub mod bench;
 pub mod cache;
 pub mod demo;
 pub mod episodes;

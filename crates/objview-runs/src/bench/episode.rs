@@ -1,0 +1,298 @@
+//! `objview bench episode`: the cost of one episode step in the environment — render + fusion +
+//! SC/NSC/CD at 3 τ + MS — on a built-in object tessellated to a given triangle count with a
+//! sampled ground-truth cloud, and the planning time per step of RSE / RSE-Mov on the same
+//! object.
+//!
+//! The engine episode follows a fixed script (a spread order of tammes-360 candidates), once on
+//! one thread and once on every thread of the pool, so that the step cost does not depend on a
+//! planner's choices; the planners then run their own short episodes on the same scene.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use objview_episode::{
+    run_episode, scene_from_parts, Budget, EpisodeResult, EpisodeSettings, ExecutionMode, Scripted,
+};
+use objview_geom::cloud::sample_surface;
+use objview_geom::normalize::{normalize, Normalization};
+use objview_geom::Pose;
+use objview_views::{start_pose, ViewSet, ViewSpace};
+use serde_json::{json, Value};
+
+use super::{thread_pool, Spread};
+use crate::episodes::PlannerFactory;
+use crate::RunError;
+
+/// The planners whose planning time per step is measured, in order.
+pub const TIMED_PLANNERS: [&str; 2] = ["rse", "rse-mov"];
+
+/// What `objview bench episode` measures.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EpisodeBenchSettings {
+    /// Built-in object (see `objview objects list`).
+    pub object: String,
+    /// Target triangle count.
+    pub triangles: usize,
+    /// Ground-truth points (sampled on the surface).
+    pub gt_points: usize,
+    /// Views per engine episode (tammes-360 candidates in a fixed spread order; at most 360).
+    pub views: usize,
+    /// Planner steps timed for each of [`TIMED_PLANNERS`] (0 skips them).
+    pub planner_steps: usize,
+}
+
+impl Default for EpisodeBenchSettings {
+    /// The mug at ~100k triangles with 300k ground-truth points, 50 views, 10 planner steps.
+    fn default() -> EpisodeBenchSettings {
+        EpisodeBenchSettings {
+            object: "mug".into(),
+            triangles: 100_000,
+            gt_points: 300_000,
+            views: 50,
+            planner_steps: 10,
+        }
+    }
+}
+
+/// Median seconds per engine stage of the one-thread episode.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StageMedians {
+    /// Depth rendering.
+    pub render: f64,
+    /// Fusion of the frame into the reconstruction.
+    pub fusion: f64,
+    /// Nearest-fused distances of the ground truth (SC, CD) and the reference (NSC).
+    pub distances: f64,
+    /// Coverage counts and MS.
+    pub coverage_ms: f64,
+}
+
+/// Planning time per step of one planner (its first step, from the start pose, left out).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlannerTiming {
+    /// The planner's name.
+    pub planner: String,
+    /// Steps timed.
+    pub steps: usize,
+    /// Seconds per step.
+    pub seconds: Spread,
+}
+
+/// The figures of [`bench_episode`]; times in seconds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EpisodeBenchReport {
+    /// What was measured.
+    pub settings: EpisodeBenchSettings,
+    /// Triangles of the tessellated object.
+    pub triangles: usize,
+    /// Ground-truth points.
+    pub gt_points: usize,
+    /// Points of the observable reference.
+    pub reference_points: usize,
+    /// Views the observable reference was rendered from.
+    pub reference_views: usize,
+    /// Time to build the scene (mostly the observable reference).
+    pub reference_seconds: f64,
+    /// Engine seconds per step of the one-thread episode, in step order.
+    pub engine_step_seconds: Vec<f64>,
+    /// Their spread.
+    pub engine: Spread,
+    /// Their median after the first 5 views (NaN when there are no more).
+    pub engine_median_after_5: f64,
+    /// Wall time of the one-thread episode.
+    pub engine_episode_seconds: f64,
+    /// Threads of the pool (the all-threads episode and the planners run on it).
+    pub threads: usize,
+    /// Engine seconds per step of the same episode on every thread.
+    pub engine_all_threads: Spread,
+    /// Wall time of the all-threads episode.
+    pub engine_all_threads_episode_seconds: f64,
+    /// Stage medians of the one-thread episode.
+    pub stages: StageMedians,
+    /// Planning times, one per [`TIMED_PLANNERS`] entry (empty when `planner_steps` is 0).
+    pub planners: Vec<PlannerTiming>,
+}
+
+impl EpisodeBenchReport {
+    /// One-thread median over all-threads median.
+    pub fn all_threads_speedup(&self) -> f64 {
+        self.engine.median / self.engine_all_threads.median.max(1e-12)
+    }
+
+    /// The figures as `objview bench episode --json` writes them.
+    pub fn to_json(&self) -> Value {
+        let planners: Vec<Value> = self
+            .planners
+            .iter()
+            .map(|p| {
+                json!({"planner": p.planner, "steps": p.steps, "median_s": p.seconds.median,
+                       "p90_s": p.seconds.p90, "max_s": p.seconds.max})
+            })
+            .collect();
+        json!({
+            "settings": crate::provenance::settings("bench episode", json!({
+                "object": self.settings.object, "triangles": self.triangles, "gt_points": self.gt_points,
+                "views": self.settings.views, "threads": self.threads,
+            })),
+            "reference_seconds": self.reference_seconds,
+            "reference_points": self.reference_points,
+            "engine_step_seconds": self.engine_step_seconds,
+            "engine_median_s": self.engine.median,
+            "engine_p90_s": self.engine.p90,
+            "engine_all_threads": {"threads": self.threads, "median_s": self.engine_all_threads.median,
+                                   "p90_s": self.engine_all_threads.p90},
+            "stage_median_s": {"render": self.stages.render, "fusion": self.stages.fusion,
+                               "distances": self.stages.distances, "coverage_ms": self.stages.coverage_ms},
+            "planners": planners,
+        })
+    }
+}
+
+/// Builds the scene of `settings.object` (view space `whole`, sampled ground truth, no
+/// reference cache), runs the scripted engine episode on one thread and on every thread of the
+/// current rayon pool, then a short episode of each of [`TIMED_PLANNERS`] made by `planners`.
+pub fn bench_episode(
+    settings: &EpisodeBenchSettings,
+    planners: PlannerFactory<'_>,
+) -> Result<EpisodeBenchReport, RunError> {
+    let name = &settings.object;
+    let obj = objview_geom::synth::find(name)
+        .ok_or_else(|| RunError::Invalid(format!("--object: no built-in object named {name:?}")))?;
+    let (mesh, _) = normalize(
+        obj.build_with_triangles(settings.triangles),
+        Normalization::Unit,
+        std::path::Path::new(name),
+    )?;
+    let gt = sample_surface(&mesh, settings.gt_points, 0);
+    let episode = EpisodeSettings { enough_info: false, ..Default::default() };
+    let space = ViewSpace::builtin("whole").ok_or_else(|| RunError::Invalid("no view space whole".into()))?;
+    let t = Instant::now();
+    let scene = Arc::new(scene_from_parts(
+        name,
+        mesh.clone(),
+        gt,
+        "sampled".into(),
+        &space,
+        "whole",
+        &episode,
+        None,
+    )?);
+    let reference_seconds = t.elapsed().as_secs_f64();
+    let candidates = Arc::new(ViewSet::resolve("tammes-360")?.poses(episode.view_radius));
+    // A spread order: every 37th candidate (37 is coprime with 360).
+    let order: Vec<Pose> = (0..settings.views.min(360)).map(|i| candidates[(i * 37) % 360]).collect();
+    let engine_run = |threads: usize| -> Result<(EpisodeResult, f64), RunError> {
+        thread_pool(threads)?.install(|| {
+            let mut script = Scripted::poses(&order, ExecutionMode::SetCoverPlan);
+            let t = Instant::now();
+            let r = run_episode(
+                scene.clone(),
+                &mut script,
+                &episode,
+                Budget::Auto,
+                0,
+                start_pose(3.0),
+                candidates.clone(),
+                json!({}),
+            )?;
+            Ok((r, t.elapsed().as_secs_f64()))
+        })
+    };
+    let (r, engine_episode_seconds) = engine_run(1)?;
+    let engine_step_seconds: Vec<f64> = r.steps.iter().map(|s| s.engine_seconds).collect();
+    let engine = Spread::of(engine_step_seconds.clone());
+    let engine_median_after_5 = Spread::of(engine_step_seconds.iter().skip(5).copied().collect()).median;
+    // The far-target updates run on the rayon pool: the same episode on every thread.
+    let threads = rayon::current_num_threads();
+    let (r_all, engine_all_threads_episode_seconds) = engine_run(threads)?;
+    let engine_all_threads = Spread::of(r_all.steps.iter().map(|s| s.engine_seconds).collect());
+    let stage = |i: usize| Spread::of(r.steps.iter().map(|s| s.stage_seconds[i]).collect()).median;
+    let stages =
+        StageMedians { render: stage(0), fusion: stage(1), distances: stage(2), coverage_ms: stage(3) };
+    let mut timings = Vec::new();
+    if settings.planner_steps > 0 {
+        for name in TIMED_PLANNERS {
+            let mut p = planners(name, &[]).map_err(RunError::Invalid)?;
+            let s = EpisodeSettings { cap: settings.planner_steps + 1, ..episode.clone() };
+            let r = run_episode(
+                scene.clone(),
+                p.as_mut(),
+                &s,
+                Budget::Auto,
+                0,
+                start_pose(3.0),
+                candidates.clone(),
+                json!({}),
+            )?;
+            let plan: Vec<f64> = r.steps.iter().skip(1).map(|s| s.planner_seconds).collect();
+            timings.push(PlannerTiming {
+                planner: name.to_string(),
+                steps: plan.len(),
+                seconds: Spread::of(plan),
+            });
+        }
+    }
+    Ok(EpisodeBenchReport {
+        settings: settings.clone(),
+        triangles: mesh.num_triangles(),
+        gt_points: scene.gt.len(),
+        reference_points: scene.reference.points.len(),
+        reference_views: scene.reference.poses.len(),
+        reference_seconds,
+        engine_step_seconds,
+        engine,
+        engine_median_after_5,
+        engine_episode_seconds,
+        threads,
+        engine_all_threads,
+        engine_all_threads_episode_seconds,
+        stages,
+        planners: timings,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_tiny_episode_gives_finite_ordered_figures() {
+        let settings = EpisodeBenchSettings {
+            object: "cube".into(),
+            triangles: 200,
+            gt_points: 2000,
+            views: 3,
+            planner_steps: 1,
+        };
+        let r = bench_episode(&settings, &objview_planners::registry::with_params).unwrap();
+        assert_eq!(r.engine_step_seconds.len(), 4, "the start and 3 views");
+        for s in [r.engine, r.engine_all_threads].iter().chain(r.planners.iter().map(|p| &p.seconds)) {
+            assert!(s.median.is_finite() && s.median >= 0.0, "{s:?}");
+            assert!(s.median <= s.p90 && s.p90 <= s.max, "{s:?}");
+        }
+        assert_eq!(r.engine.max, r.engine_step_seconds.iter().cloned().fold(0.0, f64::max));
+        assert!(r.engine_median_after_5.is_nan(), "only 4 steps");
+        assert_eq!(
+            r.planners.iter().map(|p| (p.planner.as_str(), p.steps)).collect::<Vec<_>>(),
+            [("rse", 1), ("rse-mov", 1)]
+        );
+        assert_eq!(r.gt_points, 2000);
+        assert!(r.reference_points > 0 && r.reference_views > 0);
+        let v = r.to_json();
+        for key in [
+            "settings",
+            "reference_seconds",
+            "reference_points",
+            "engine_step_seconds",
+            "engine_median_s",
+            "engine_p90_s",
+            "engine_all_threads",
+            "stage_median_s",
+            "planners",
+        ] {
+            assert!(v.get(key).is_some(), "{key}");
+        }
+        assert_eq!(v["settings"]["command"], "bench episode");
+        assert_eq!(v["planners"][1]["planner"], "rse-mov");
+    }
+}

@@ -1,0 +1,62 @@
+//! The measurement procedures of `objview bench …`, so that the command line only turns its
+//! arguments into settings and prints the figures these return:
+//!
+//! - [`episode`]: the cost of one episode step in the environment and the planning time per
+//!   step of RSE / RSE-Mov ([`episode::bench_episode`]).
+//! - [`annotate`]: the difficulty annotation's cost per stage and peak memory
+//!   ([`annotate::AnnotateBench`]), and how much its results depend on the ground-truth
+//!   sampling seed ([`annotate::StabilityBench`]).
+//! - [`render`]: depth rendering against an Open3D peer where one is installed, and O(v) per
+//!   view in both visibility modes ([`render::RenderBench`]).
+//!
+//! Benchmarks are procedures run on demand, never timed unit tests: the tests here only check
+//! the shape of the figures. Medians and percentiles are [`objview_geom::stats`]'s.
+
+pub mod annotate;
+pub mod episode;
+pub mod render;
+
+use objview_geom::stats::{median, percentile};
+
+/// Median, nearest-rank 90th percentile and maximum of a set of timings (seconds); NaN for
+/// each when there are none.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Spread {
+    /// The median.
+    pub median: f64,
+    /// The nearest-rank 90th percentile.
+    pub p90: f64,
+    /// The largest sample.
+    pub max: f64,
+}
+
+impl Spread {
+    /// The spread of `samples` (in any order).
+    pub fn of(mut samples: Vec<f64>) -> Spread {
+        let median = median(&mut samples); // sorts
+        Spread { median, p90: percentile(&samples, 0.9), max: percentile(&samples, 1.0) }
+    }
+}
+
+/// A rayon pool of `threads` threads.
+fn thread_pool(threads: usize) -> Result<rayon::ThreadPool, crate::RunError> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| crate::RunError::Invalid(format!("thread pool: {e}")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Spread;
+
+    #[test]
+    fn a_spread_is_median_p90_and_max_of_unsorted_samples() {
+        let s = Spread::of(vec![5.0, 1.0, 4.0, 2.0, 3.0, 10.0, 9.0, 8.0, 7.0, 6.0]);
+        assert_eq!(s, Spread { median: 5.5, p90: 9.0, max: 10.0 });
+        let one = Spread::of(vec![0.25]);
+        assert_eq!(one, Spread { median: 0.25, p90: 0.25, max: 0.25 });
+        let none = Spread::of(Vec::new());
+        assert!(none.median.is_nan() && none.p90.is_nan() && none.max.is_nan());
+    }
+}

@@ -49,7 +49,29 @@ pub use select::{select_rse, select_rse_mov};
 pub use settings::{RseSettings, RseVariant};
 
 use crate::occupancy::OccupancyGrid;
+use crate::registry::{settings_from, settings_json, PlannerEntry};
 use select::{distance, same_position};
+
+/// The registry row of `rse`; its settings are [`RseSettings`] (defaults [`RseSettings::rse`]).
+pub const RSE_ENTRY: PlannerEntry = PlannerEntry {
+    name: "rse",
+    family: Family::Classical,
+    mode: ExecutionMode::Iterative,
+    summary: "next best view by rear-side entropy on an occupancy grid",
+    defaults: || settings_json(&RseSettings::rse()),
+    build: |settings| Ok(Box::new(Rse::new(settings_from("rse", settings, RseSettings::rse)?))),
+};
+
+/// The registry row of `rse-mov`; its settings are [`RseSettings`] (defaults
+/// [`RseSettings::rse_mov`]).
+pub const RSE_MOV_ENTRY: PlannerEntry = PlannerEntry {
+    name: "rse-mov",
+    family: Family::Classical,
+    mode: ExecutionMode::Iterative,
+    summary: "rear-side entropy traded against travel distance (weight gamma)",
+    defaults: || settings_json(&RseSettings::rse_mov()),
+    build: |settings| Ok(Box::new(Rse::new(settings_from("rse-mov", settings, RseSettings::rse_mov)?))),
+};
 
 /// The per-episode state.
 #[derive(Debug, Clone)]

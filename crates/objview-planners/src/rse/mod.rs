@@ -26,6 +26,10 @@
 //! exactly, so the fast gain equals the plain sum over rays ([`GainMap::view_gain_plain`]) bit
 //! for bit (tested). Candidates are scored in parallel (rayon), and each candidate's sum runs over
 //! its rays in a fixed order, so the result does not depend on the thread count.
+//!
+//! Layout: `settings` (the parameters), `gain` (the [`GainMap`] and its view gain),
+//! `projection` (image footprints for the splatting), `skip` (the walk through uniform boxes),
+//! `select` (RSE and RSE-Mov selection rules); the planner itself is here.
 
 mod gain;
 mod projection;

@@ -35,6 +35,11 @@ use serde::de::DeserializeOwned;
 use serde::Serialize;
 use serde_json::Value;
 
+/// The constructor of a [`PlannerEntry`]: a fresh planner from `None` (its defaults) or from
+/// `Some(settings)` (the defaults after overrides), or an error naming the planner and the
+/// problem.
+pub type BuildFn = fn(Option<Value>) -> Result<Box<dyn Planner>, String>;
+
 /// One registered planner: what listings show about it, its settings and how to build it.
 /// Plain data, so that tables of rows can be `const`.
 #[derive(Debug, Clone, Copy)]
@@ -52,7 +57,7 @@ pub struct PlannerEntry {
     pub defaults: fn() -> Option<Value>,
     /// A fresh planner: `None` builds it with its defaults; `Some(settings)` with the defaults
     /// after overrides (an error names the planner and the problem).
-    pub build: fn(Option<Value>) -> Result<Box<dyn Planner>, String>,
+    pub build: BuildFn,
 }
 
 impl PlannerEntry {

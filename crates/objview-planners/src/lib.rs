@@ -6,6 +6,11 @@
 //!   ([`tsp`]).
 //! - [`rse`]: rear-side entropy (Delmerico et al. 2018) and its movement-aware variant
 //!   RSE-Mov, on a probabilistic occupancy grid ([`occupancy`]).
+//!
+//! [`registry`] knows them by name: one row per planner ([`registry::PlannerEntry`], next to
+//! the planner), collected in [`registry::TABLE`].
+
+#![warn(missing_docs)]
 
 pub mod occupancy;
 pub mod oracle;

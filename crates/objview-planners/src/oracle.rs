@@ -18,7 +18,51 @@ use objview_episode::{
 use objview_geom::Pose;
 use objview_render::{Camera, Frame, Renderer};
 
+use serde::{Deserialize, Serialize};
+
 use crate::random::same_pose;
+use crate::registry::{settings_json, PlannerEntry};
+
+/// The registry row of `oracle`; its settings are [`OracleSettings`].
+pub const ENTRY: PlannerEntry = PlannerEntry {
+    name: "oracle",
+    family: Family::Oracle,
+    mode: ExecutionMode::Iterative,
+    summary: "greedy on the ground truth: the view adding the most coverage (diagnostics)",
+    defaults: || settings_json(&OracleSettings::default()),
+    build: |settings| {
+        let settings = match settings {
+            None => OracleSettings::default(),
+            Some(v) => OracleSettings::from_json(&v)?,
+        };
+        Ok(Box::new(Oracle::new(settings)))
+    },
+};
+
+/// The oracle's parameters.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct OracleSettings {
+    /// Coverage threshold of the gain (default 0.01).
+    pub tau: f64,
+    /// Fusion voxel for the per-candidate clouds (default 0.005).
+    pub voxel: f64,
+}
+
+impl Default for OracleSettings {
+    fn default() -> Self {
+        OracleSettings { tau: 0.01, voxel: 0.005 }
+    }
+}
+
+impl OracleSettings {
+    /// The settings in `v` (an object with `tau` and `voxel`); both must be positive numbers.
+    pub fn from_json(v: &serde_json::Value) -> Result<OracleSettings, String> {
+        let tau = v["tau"].as_f64().filter(|t| *t > 0.0).ok_or("oracle tau must be a positive number")?;
+        let voxel =
+            v["voxel"].as_f64().filter(|t| *t > 0.0).ok_or("oracle voxel must be a positive number")?;
+        Ok(OracleSettings { tau, voxel })
+    }
+}
 
 /// The oracle planner.
 #[derive(Debug, Clone)]
@@ -35,17 +79,24 @@ pub struct Oracle {
     pub precompute_seconds: f64,
 }
 
-impl Default for Oracle {
-    fn default() -> Self {
+impl Oracle {
+    /// An oracle with `settings`.
+    pub fn new(settings: OracleSettings) -> Oracle {
         Oracle {
-            tau: 0.01,
-            voxel: 0.005,
+            tau: settings.tau,
+            voxel: settings.voxel,
             candidates: Vec::new(),
             feasible: Vec::new(),
             covers: Vec::new(),
             taken: Vec::new(),
             precompute_seconds: 0.0,
         }
+    }
+}
+
+impl Default for Oracle {
+    fn default() -> Self {
+        Oracle::new(OracleSettings::default())
     }
 }
 

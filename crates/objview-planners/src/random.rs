@@ -9,6 +9,18 @@ use objview_geom::Pose;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use crate::registry::{no_settings, PlannerEntry};
+
+/// The registry row of `random` (no parameters).
+pub const ENTRY: PlannerEntry = PlannerEntry {
+    name: "random",
+    family: Family::Baseline,
+    mode: ExecutionMode::Iterative,
+    summary: "a uniformly random feasible, unvisited view per step (sanity baseline)",
+    defaults: no_settings,
+    build: |_| Ok(Box::new(RandomPlanner::default())),
+};
+
 /// Whether two poses are the same camera placement (centre, look-at, roll within 1e-9).
 pub fn same_pose(a: &Pose, b: &Pose) -> bool {
     a.to_array().iter().zip(b.to_array()).all(|(x, y)| (x - y).abs() <= 1e-9)

@@ -29,7 +29,21 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::registry::{settings_from, settings_json, PlannerEntry};
 use crate::tsp::{shortest_open_path, TspError, TspResult, TspSettings};
+
+/// The registry row of `random-tsp`; its settings are [`TspSettings`] (the path ordering).
+pub const ENTRY: PlannerEntry = PlannerEntry {
+    name: RandomTsp::NAME,
+    family: Family::Classical,
+    mode: ExecutionMode::BudgetedPlan,
+    summary: "K random feasible views, visited on the exact shortest open path (Random+TSP)",
+    defaults: || settings_json(&TspSettings::default()),
+    build: |settings| {
+        let settings = settings_from(RandomTsp::NAME, settings, TspSettings::default)?;
+        Ok(Box::new(RandomTsp::new(settings).map_err(|e| e.to_string())?))
+    },
+};
 
 /// What [`RandomTsp::reset`](Planner::reset) planned, for reporting.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -73,22 +73,60 @@ pub enum TspError {
     Empty,
     /// A row of the wrong length.
     #[error("the distance matrix is not square: it has {n} rows but row {row} has {len} entries")]
-    NotSquare { n: usize, row: usize, len: usize },
+    NotSquare {
+        /// Number of rows.
+        n: usize,
+        /// The first row of the wrong length.
+        row: usize,
+        /// Its length.
+        len: usize,
+    },
     /// NaN or ±∞.
     #[error("distance [{i}][{j}] = {value} is not finite")]
-    NonFinite { i: usize, j: usize, value: f64 },
+    NonFinite {
+        /// Row.
+        i: usize,
+        /// Column.
+        j: usize,
+        /// The entry.
+        value: f64,
+    },
     /// A negative distance.
     #[error("distance [{i}][{j}] = {value} is negative; distances must be non-negative")]
-    Negative { i: usize, j: usize, value: f64 },
+    Negative {
+        /// Row.
+        i: usize,
+        /// Column.
+        j: usize,
+        /// The entry.
+        value: f64,
+    },
     /// The start node is not a node.
     #[error("start node {start} is out of range: the distance matrix has {n} nodes")]
-    StartOutOfRange { start: usize, n: usize },
+    StartOutOfRange {
+        /// The start node asked for.
+        start: usize,
+        /// Number of nodes.
+        n: usize,
+    },
     /// A setting outside its range.
     #[error("invalid TSP setting {name} = {value}: {reason}")]
-    InvalidSetting { name: &'static str, value: f64, reason: &'static str },
+    InvalidSetting {
+        /// The setting's name (a [`TspSettings`] field).
+        name: &'static str,
+        /// Its value.
+        value: f64,
+        /// What is wrong with it.
+        reason: &'static str,
+    },
     /// HiGHS failed or returned an inconsistent answer.
     #[error("HiGHS failed on the open-path ILP over {n} nodes: {message}")]
-    Solver { n: usize, message: String },
+    Solver {
+        /// Number of nodes.
+        n: usize,
+        /// What went wrong.
+        message: String,
+    },
 }
 
 /// How the returned order was obtained.

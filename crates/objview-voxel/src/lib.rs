@@ -5,7 +5,9 @@
 //!   membership and key → index lookups (indices address per-view bitsets).
 //! - [`visibility`]: O(v) ⊆ S_gt per camera, modes `inverse` (ray walk, default) and `mesh`
 //!   (rendered cloud), single views or batches, bitset helpers for unions and set cover.
-//! - [`bench`]: per-view timing of both modes (`objview bench render`).
+//! - [`mod@bench`]: per-view timing of both modes (`objview bench render`).
+
+#![warn(missing_docs)]
 
 pub mod bench;
 pub mod error;

@@ -1,0 +1,119 @@
+//! Unit tests of the visibility internals: mode names, the floor-free pixel lookup, bitset
+//! helpers, `next_up`, the per-axis cell search both ways, and the distance field.
+
+use super::axis::{cell_at, next_up, start_cell, up_cell};
+use super::field::{distance_field, FIELD_CAP};
+use super::project::pixel_of;
+use super::*;
+
+#[test]
+fn mode_parse_and_display() {
+    assert_eq!("inverse".parse::<VisibilityMode>().unwrap(), VisibilityMode::Inverse);
+    assert_eq!("mesh".parse::<VisibilityMode>().unwrap(), VisibilityMode::Mesh);
+    assert!("Mesh".parse::<VisibilityMode>().is_err());
+    assert_eq!(VisibilityMode::default().to_string(), "inverse");
+}
+
+#[test]
+fn fast_pixel_of_matches_intrinsics() {
+    use rand::{Rng, SeedableRng};
+    let k = objview_render::Intrinsics::default();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let mut cases: Vec<[f64; 3]> = (0..200_000)
+        .map(|_| [rng.gen_range(-1.5..1.5), rng.gen_range(-1.5..1.5), rng.gen_range(-0.5..3.0)])
+        .collect();
+    // Exactly on the image border and on pixel edges.
+    for (u, v) in [(0.0, 0.0), (512.0, 3.0), (511.999_999, 0.0), (-1e-12, 5.0), (256.0, 512.0)] {
+        cases.push([(u - k.cx) / k.fx, (v - k.cy) / k.fy, 1.0]);
+    }
+    cases.push([0.0, 0.0, 1e-9]);
+    cases.push([0.0, 0.0, 1.1e-9]);
+    for p in cases {
+        assert_eq!(pixel_of(&k, p), k.pixel_of(p), "{p:?}");
+    }
+}
+
+#[test]
+fn bitset_helpers_roundtrip() {
+    let a = vec![0u32, 5, 63, 64, 130];
+    let b = to_bitset(&a, 131);
+    assert_eq!(b.len(), 3);
+    assert_eq!(bitset_to_indices(&b), a);
+    assert_eq!(bitset_count(&b), 5);
+    let c = to_bitset(&[1, 64, 129], 131);
+    let u = union_bitsets(&[b, c], 131);
+    assert_eq!(bitset_to_indices(&u), vec![0, 1, 5, 63, 64, 129, 130]);
+    assert_eq!(union(&[vec![3, 1], vec![2, 3]]), vec![1, 2, 3]);
+    let cov = coverage_counts(&[to_bitset(&[0, 2], 4), to_bitset(&[2, 3], 4), to_bitset(&[2], 4)], 4);
+    assert_eq!(cov, vec![1, 0, 3, 1]);
+}
+
+#[test]
+fn next_up_is_the_next_float() {
+    assert_eq!(next_up(1.0), 1.0 + f64::EPSILON);
+    assert_eq!(next_up(0.0), f64::from_bits(1));
+    assert_eq!(next_up(-0.0), f64::from_bits(1));
+    assert_eq!(next_up(-1.0), -1.0 + f64::EPSILON / 2.0);
+    assert_eq!(next_up(f64::MAX), f64::INFINITY);
+    assert_eq!(next_up(f64::INFINITY), f64::INFINITY);
+    assert_eq!(next_up(f64::NEG_INFINITY), -f64::MAX);
+    assert!(next_up(f64::NAN).is_nan());
+    for x in [2.5f64, -3.75, 1e-300, -1e-300, 6.0] {
+        let y = next_up(x);
+        assert!(y > x && (x + y) / 2.0 == x || (x + y) / 2.0 == y, "{x}");
+    }
+}
+
+/// `up_cell` on mirrored planes finds the same cell as `cell_at` walking down, and on the
+/// planes themselves the same as `cell_at` walking up, for times on and around crossings.
+#[test]
+fn up_cell_matches_cell_at_both_ways() {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+    let r = 0.02;
+    for _ in 0..2000 {
+        let n = rng.gen_range(3..40usize);
+        let o: f64 = rng.gen_range(-1.0..1.0);
+        let g0 = rng.gen_range(-30..10) as f64;
+        let p: Vec<f64> = (0..=n).map(|g| (g0 + g as f64) * r - o).collect();
+        let m: Vec<f64> = p.iter().rev().map(|&x| -x).collect();
+        let d: f64 = rng.gen_range(0.01..1.0);
+        let s = 1.0 / d;
+        let mut times: Vec<f64> = p.iter().map(|&x| x * s).collect();
+        times.extend((0..10).map(|_| rng.gen_range(-3.0..3.0)));
+        for t in times.clone() {
+            times.push(next_up(t));
+        }
+        for &t in &times {
+            let (lo, hi) = (0, n - 1);
+            let up = cell_at::<false>(&p, s, 1, d, r, t, lo, hi);
+            assert_eq!(up_cell(&p, s, d, 1.0 / r, t, lo, hi), up, "up t {t}");
+            let down = cell_at::<false>(&p, -s, -1, -d, r, t, lo, hi);
+            assert_eq!(n - 1 - up_cell(&m, s, d, 1.0 / r, t, lo, hi), down, "down t {t}");
+            let incl = cell_at::<true>(&p, s, 1, d, r, t, lo, hi);
+            assert_eq!(up_cell(&p, s, d, 1.0 / r, next_up(t), lo, hi), incl, "inclusive t {t}");
+            assert_eq!(start_cell(&p, s, d, 1.0 / r, t), (up, p[up + 1] * s), "start t {t}");
+        }
+    }
+}
+
+/// Brute-force Chebyshev distances on a small grid.
+#[test]
+fn distance_field_is_exact_chebyshev() {
+    let keys = [[0, 0, 0], [7, 1, -3], [2, 9, 4], [-5, 3, 70]];
+    let set = VoxelSet::from_keys(&keys, 0.1).unwrap();
+    let f = distance_field(&set);
+    let [nx, ny, nz] = set.grid_dims();
+    let o = set.grid_origin();
+    for x in 0..nx {
+        for y in 0..ny {
+            for z in 0..nz {
+                let k = [o[0] + x as i32, o[1] + y as i32, o[2] + z as i32];
+                let d =
+                    keys.iter().map(|q| (0..3).map(|a| (q[a] - k[a]).abs()).max().unwrap()).min().unwrap();
+                let want = d.min(FIELD_CAP as i32 + 1) as u8;
+                assert_eq!(f[(x * ny + y) * nz + z], want, "cell {k:?}");
+            }
+        }
+    }
+}

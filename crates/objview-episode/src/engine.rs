@@ -18,15 +18,15 @@ use crate::coverage::Targets;
 use crate::fusion::FusedCloud;
 use crate::grid::Domain;
 use crate::path::pose_distance;
-use crate::planner::{
-    Action, Budget, Environment, EpisodeContext, ExecutionMode, Observation, OracleAccess, Planner,
-    StopReason,
-};
+use crate::planner::{Action, Environment, EpisodeContext, Observation, OracleAccess, Planner};
 use crate::reference::Reference;
-use crate::result::{tau_key, Checkpoint, EpisodeResult, Metrics, Step, TerminalSource};
+use crate::result::{Checkpoint, EpisodeResult, Metrics, Step};
 use crate::settings::EpisodeSettings;
 use crate::stabilization::Stabilization;
 use crate::validate::{check_pose, check_view_pose};
+use crate::vocab::{
+    tau_key, wire_names, Budget, CheckpointKey, ExecutionMode, Family, StopReason, TerminalSource,
+};
 use crate::EpisodeError;
 
 /// The hidden object of an episode, prepared once per (object, view space).
@@ -48,6 +48,7 @@ pub struct Scene {
     pub reference: Arc<Reference>,
     /// The metric grid domain (covers mesh, ground truth and reference).
     pub domain: Domain,
+    /// The camera intrinsics of every view (SPEC §2).
     pub intrinsics: Intrinsics,
     /// Fresh (never updated) ground-truth and reference target sets for the reference cap
     /// they were built with: every episode on the scene starts from a clone, sharing their
@@ -94,17 +95,24 @@ pub fn scene_domain(mesh: &Mesh, gt: &[[f64; 3]], h: f64) -> Domain {
 /// Method facts recorded in results.
 #[derive(Debug, Clone)]
 pub struct MethodInfo {
+    /// Method name (`rse`, a remote planner's name).
     pub name: String,
-    pub family: String,
+    /// Its family.
+    pub family: Family,
+    /// Its execution mode (decides how the budget applies).
     pub mode: ExecutionMode,
+    /// Its parameters.
     pub params: serde_json::Value,
 }
 
 /// How an episode ended.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Terminal {
+    /// Who ended it.
     pub source: TerminalSource,
+    /// The terminal reason (`plan_end`, `invalid_action`, `max_cap_reached`, …).
     pub reason: String,
+    /// Human-readable detail (empty when there is nothing to add).
     pub detail: String,
 }
 
@@ -124,7 +132,7 @@ pub struct Episode {
     ms: Vec<Stabilization>,
     history: Vec<Pose>,
     steps: Vec<Step>,
-    checkpoints: BTreeMap<String, Checkpoint>,
+    checkpoints: BTreeMap<CheckpointKey, Checkpoint>,
     ks: Vec<usize>,
     runtime: f64,
     path_cost: f64,
@@ -294,7 +302,7 @@ impl Episode {
                 None => self.end(
                     TerminalSource::Benchmark,
                     "invalid_action",
-                    format!("unknown stop reason {reason:?} (valid: plan_end, candidate_exhausted, next_view_visited, next_view_infeasible)"),
+                    format!("unknown stop reason {reason:?} (valid: {})", wire_names(&StopReason::ALL)),
                 ),
             },
             Action::Move { pose } => {
@@ -313,7 +321,10 @@ impl Episode {
                         self.end(
                             TerminalSource::Benchmark,
                             "budget_reached",
-                            format!("the plan asked for view {} beyond its budget K = {k}", self.history.len()),
+                            format!(
+                                "the plan asked for view {} beyond its budget K = {k}",
+                                self.history.len()
+                            ),
                         );
                         return;
                     }
@@ -358,12 +369,12 @@ impl Episode {
     }
 
     fn all_checkpoints_reached(&self) -> bool {
-        self.ks.iter().all(|k| self.checkpoints.contains_key(&format!("K={k}")))
+        self.ks.iter().all(|&k| self.checkpoints.contains_key(&CheckpointKey::Budget(k)))
             && self
                 .settings
                 .ms_deltas
                 .iter()
-                .all(|d| self.checkpoints.contains_key(&format!("MS@{}", tau_key(*d))))
+                .all(|&d| self.checkpoints.contains_key(&CheckpointKey::Stabilized(d)))
     }
 
     /// Renders, fuses and scores the view from `pose`.
@@ -421,7 +432,7 @@ impl Episode {
         for m in &mut self.ms {
             ms_voxels.insert(tau_key(m.delta), m.count());
             if m.end_step(step) {
-                triggered.push(format!("MS@{}", tau_key(m.delta)));
+                triggered.push(CheckpointKey::Stabilized(m.delta));
             }
         }
         let (engine_seconds, stage_seconds) = if self.settings.record_timings {
@@ -430,13 +441,13 @@ impl Episode {
         } else {
             (0.0, [0.0; 4])
         };
-        for name in triggered {
-            self.checkpoints.insert(name, Checkpoint { step, metrics: metrics.clone() });
+        for key in triggered {
+            self.checkpoints.insert(key, Checkpoint { step, metrics: metrics.clone() });
         }
         let planner_views = step;
         if self.ks.contains(&planner_views) {
             self.checkpoints
-                .insert(format!("K={planner_views}"), Checkpoint { step, metrics: metrics.clone() });
+                .insert(CheckpointKey::Budget(planner_views), Checkpoint { step, metrics: metrics.clone() });
         }
         self.steps.push(Step {
             step,
@@ -457,10 +468,8 @@ impl Episode {
             self.end(TerminalSource::Exception, "interrupted", "the episode was not finished");
         }
         let last = self.steps.last().expect("the start view is always taken");
-        self.checkpoints.insert(
-            crate::result::TERMINAL_CHECKPOINT.into(),
-            Checkpoint { step: last.step, metrics: last.metrics.clone() },
-        );
+        self.checkpoints
+            .insert(CheckpointKey::Terminal, Checkpoint { step: last.step, metrics: last.metrics.clone() });
         let t = self.terminal.clone().unwrap_or(Terminal {
             source: TerminalSource::Exception,
             reason: "interrupted".into(),
@@ -470,10 +479,10 @@ impl Episode {
             settings: settings_record,
             uid: self.scene.uid.clone(),
             method: self.method.name.clone(),
-            family: self.method.family.clone(),
-            execution_mode: mode_name(self.method.mode).into(),
+            family: self.method.family,
+            execution_mode: self.method.mode,
             view_space: self.scene.space_name.clone(),
-            budget: self.budget.label(),
+            budget: self.budget,
             seed: self.seed,
             start_pose: self.start_pose.to_array(),
             visited_poses: self.history.iter().map(|p| p.to_array()).collect(),
@@ -491,15 +500,6 @@ impl Episode {
                 0.0
             },
         }
-    }
-}
-
-/// `iterative`, `budgeted_plan`, `set_cover_plan`.
-pub fn mode_name(m: ExecutionMode) -> &'static str {
-    match m {
-        ExecutionMode::Iterative => "iterative",
-        ExecutionMode::BudgetedPlan => "budgeted_plan",
-        ExecutionMode::SetCoverPlan => "set_cover_plan",
     }
 }
 
@@ -540,10 +540,7 @@ pub fn run_episode(
 ) -> Result<EpisodeResult, EpisodeError> {
     let method = MethodInfo {
         name: planner.name().to_string(),
-        family: serde_json::to_value(planner.family())
-            .ok()
-            .and_then(|v| v.as_str().map(str::to_string))
-            .unwrap_or_default(),
+        family: planner.family(),
         mode: planner.execution_mode(),
         params: planner.params(),
     };

@@ -11,14 +11,15 @@
 //! - [`scripted`] — a planner that plays a fixed action list (replays, tests, benchmarks).
 //! - [`engine`] — the environment, checkpoints, budgets and terminal reasons.
 //! - [`result`] — the JSON Lines result format; [`settings`] — every SPEC §5 constant.
+//! - [`vocab`] — the names of families, execution modes, budgets, stop reasons, terminal
+//!   sources and checkpoints, each with its wire string (`Display` / `FromStr`).
 //! - [`validate`] — the one check of a pose from outside (bounds, finite numbers).
 
 pub mod path;
 pub mod planner;
 
 pub use planner::{
-    episode_seed, Action, Budget, Environment, EpisodeContext, ExecutionMode, Family, Observation,
-    OracleAccess, Planner, PlannerError, StopReason,
+    episode_seed, Action, Environment, EpisodeContext, Observation, OracleAccess, Planner, PlannerError,
 };
 pub mod coverage;
 pub mod engine;
@@ -31,14 +32,16 @@ pub mod scripted;
 pub mod settings;
 pub mod stabilization;
 pub mod validate;
+pub mod vocab;
 
 pub use engine::{run_episode, scene_domain, Episode, MethodInfo, Scene, Terminal};
 pub use reference::{observable_reference, Reference};
-pub use result::{EpisodeResult, TerminalSource};
+pub use result::EpisodeResult;
 pub use scene::{load_scene, scene_from_parts, SceneSource};
 pub use scripted::Scripted;
 pub use settings::EpisodeSettings;
 pub use validate::{check_pose, check_view_pose, PoseError, MAX_POSE_DISTANCE};
+pub use vocab::{Budget, CheckpointKey, ExecutionMode, Family, StopReason, TerminalSource};
 
 /// Errors of episode set-up (a running episode never fails: it ends with a terminal reason).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -332,23 +332,16 @@ fn panic_text(p: &Box<dyn std::any::Any + Send>) -> String {
         .unwrap_or_else(|| "panic".into())
 }
 
-fn family_name(planner: &dyn Planner) -> String {
-    serde_json::to_value(planner.family())
-        .ok()
-        .and_then(|v| v.as_str().map(str::to_string))
-        .unwrap_or_default()
-}
-
 /// The create request of `ep` for `planner`.
 pub fn create_request(planner: &dyn Planner, ep: &RemoteEpisode) -> Value {
     json!({
         "split": ep.split,
         "object": ep.object,
         "view_space": ep.view_space,
-        "budget": ep.budget.label(),
+        "budget": ep.budget.to_string(),
         "method": planner.name(),
-        "family": family_name(planner),
-        "execution_mode": objview_episode::engine::mode_name(planner.execution_mode()),
+        "family": planner.family().to_string(),
+        "execution_mode": planner.execution_mode().to_string(),
         "candidate_set": ep.candidate_set,
         "seed": ep.seed,
         "params": planner.params(),

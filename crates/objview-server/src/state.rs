@@ -15,7 +15,9 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use objview_episode::{Action, Budget, Episode, EpisodeSettings, ExecutionMode, MethodInfo, TerminalSource};
+use objview_episode::{
+    Action, Budget, Episode, EpisodeSettings, ExecutionMode, Family, MethodInfo, TerminalSource,
+};
 use objview_geom::Pose;
 use objview_render::Camera;
 use objview_views::{ViewSet, ViewSpace};
@@ -32,25 +34,34 @@ use crate::spec::RunRecord;
 pub const MAX_FEASIBLE_POSES: usize = 4_096;
 
 /// Families a remote planner may declare (`oracle` is refused: it reads ground truth).
-pub const FAMILIES: [&str; 4] = ["classical", "learned", "hybrid", "baseline"];
+pub const FAMILIES: [Family; 4] = [Family::Classical, Family::Learned, Family::Hybrid, Family::Baseline];
 
-/// A validated create request: everything needed to start the episode again (it is stored, and
-/// replayed after a restart).
+/// A validated create request: everything needed to start the episode again (it is stored as
+/// JSON, and replayed after a restart). The family, execution mode and budget are stored as
+/// their wire strings (`learned`, `iterative`, `"5"` or `"auto"`), as they always were.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CreateSpec {
+    /// The split id.
     pub split: String,
     /// The object's uid.
     pub object: String,
+    /// The view space (one of [`crate::pool::VIEW_SPACES`]).
     pub view_space: String,
     /// `auto` or K.
-    pub budget: String,
+    pub budget: Budget,
+    /// The method name ([`valid_method_name`]).
     pub method: String,
-    pub family: String,
-    pub execution_mode: String,
+    /// The declared family (one of [`FAMILIES`]).
+    pub family: Family,
+    /// The declared execution mode.
+    pub execution_mode: ExecutionMode,
+    /// The candidate set (one of [`crate::pool::CANDIDATE_SETS`]).
     pub candidate_set: String,
     /// The user seed.
     pub seed: u64,
+    /// The planner's parameters (recorded in the result).
     pub params: Value,
+    /// Whether the result records wall-clock times.
     pub record_timings: bool,
 }
 
@@ -72,12 +83,14 @@ fn string_field(
     }
 }
 
-fn one_of(name: &str, value: String, allowed: &[&str]) -> Result<String, ApiError> {
-    if allowed.contains(&value.as_str()) {
-        Ok(value)
-    } else {
-        Err(ApiError::InvalidRequest(format!("unknown {name} {value:?} (known: {})", allowed.join(", "))))
-    }
+/// The one of `allowed` whose wire name is `value`.
+fn one_of<T: Copy + std::fmt::Display>(name: &str, value: String, allowed: &[T]) -> Result<T, ApiError> {
+    allowed.iter().copied().find(|x| x.to_string() == value).ok_or_else(|| {
+        ApiError::InvalidRequest(format!(
+            "unknown {name} {value:?} (known: {})",
+            objview_episode::vocab::wire_names(allowed)
+        ))
+    })
 }
 
 /// Whether `s` is a valid method name: 1–100 characters of `A-Z a-z 0-9 . _ + -`.
@@ -129,7 +142,8 @@ impl CreateSpec {
             })?
             .uid
             .clone();
-        let view_space = one_of("view space", string_field(m, "view_space", None)?, &VIEW_SPACES)?;
+        let view_space =
+            one_of("view space", string_field(m, "view_space", None)?, &VIEW_SPACES)?.to_string();
         let budget = match field(m, "budget") {
             None => return Err(ApiError::InvalidRequest("missing field `budget`".into())),
             Some(Value::String(s)) => Budget::parse(s),
@@ -145,8 +159,8 @@ impl CreateSpec {
                 "`method` must be 1–100 characters of A-Z a-z 0-9 . _ + -, got {method:?}"
             )));
         }
-        let family = string_field(m, "family", Some("classical"))?;
-        if family == "oracle" {
+        let family = string_field(m, "family", Some(Family::Classical.as_str()))?;
+        if family == Family::Oracle.as_str() {
             return Err(ApiError::InvalidRequest(
                 "family `oracle` is refused: a remote planner never reads ground truth".into(),
             ));
@@ -154,16 +168,17 @@ impl CreateSpec {
         let family = one_of("family", family, &FAMILIES)?;
         let execution_mode = one_of(
             "execution_mode",
-            string_field(m, "execution_mode", Some("iterative"))?,
-            &["iterative", "budgeted_plan", "set_cover_plan"],
+            string_field(m, "execution_mode", Some(ExecutionMode::Iterative.as_str()))?,
+            &ExecutionMode::ALL,
         )?;
-        if execution_mode == "budgeted_plan" && budget == Budget::Auto {
+        if execution_mode == ExecutionMode::BudgetedPlan && budget == Budget::Auto {
             return Err(ApiError::InvalidRequest(
                 "a budgeted_plan needs a fixed budget K, not \"auto\"".into(),
             ));
         }
         let candidate_set =
-            one_of("candidate set", string_field(m, "candidate_set", Some("tammes-360"))?, &CANDIDATE_SETS)?;
+            one_of("candidate set", string_field(m, "candidate_set", Some("tammes-360"))?, &CANDIDATE_SETS)?
+                .to_string();
         let seed = match field(m, "seed") {
             None => 0,
             Some(v) => v.as_u64().ok_or_else(|| {
@@ -184,7 +199,7 @@ impl CreateSpec {
             split: split_id,
             object,
             view_space,
-            budget: budget.label(),
+            budget,
             method,
             family,
             execution_mode,
@@ -194,26 +209,17 @@ impl CreateSpec {
             record_timings,
         })
     }
-
-    fn budget(&self) -> Budget {
-        Budget::parse(&self.budget).unwrap_or(Budget::Auto)
-    }
-
-    fn mode(&self) -> ExecutionMode {
-        serde_json::from_value(Value::String(self.execution_mode.clone())).unwrap_or(ExecutionMode::Iterative)
-    }
 }
 
-/// How an episode ended, as the API shows it.
+/// How an episode ended, as the API shows it (read back from stored result lines as written).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TerminalInfo {
+    /// The terminal source (`algorithm_stop`, `benchmark`, `exception`).
     pub source: String,
+    /// The terminal reason.
     pub reason: String,
+    /// Its detail.
     pub detail: String,
-}
-
-fn source_name(s: TerminalSource) -> String {
-    serde_json::to_value(s).ok().and_then(|v| v.as_str().map(str::to_string)).unwrap_or_default()
 }
 
 /// What is kept of a finished episode (read back from its result line on first use).
@@ -267,7 +273,7 @@ impl Running {
 
     fn obs(&self) -> Value {
         let t = self.ep.terminal().map(|t| TerminalInfo {
-            source: source_name(t.source),
+            source: t.source.to_string(),
             reason: t.reason.clone(),
             detail: t.detail.clone(),
         });
@@ -546,7 +552,7 @@ impl AppState {
         let candidates = self.candidate_sets.get(&spec.candidate_set).ok_or_else(|| {
             ApiError::InvalidRequest(format!("unknown candidate set {:?}", spec.candidate_set))
         })?;
-        let budget = spec.budget();
+        let budget = spec.budget;
         let start_pose = objview_views::start_pose(settings.view_radius);
         let record = RunRecord {
             planner: &spec.method,
@@ -564,8 +570,8 @@ impl AppState {
         .to_json();
         let method = MethodInfo {
             name: spec.method.clone(),
-            family: spec.family.clone(),
-            mode: spec.mode(),
+            family: spec.family,
+            mode: spec.execution_mode,
             params: spec.params.clone(),
         };
         let ep = Episode::start(scene, settings, method, budget, spec.seed, start_pose)
@@ -596,7 +602,7 @@ impl AppState {
             state: "running".into(),
         };
         self.db.insert_episode(&row).map_err(|e| internal("storing the episode", e))?;
-        let budget = spec.budget();
+        let budget = spec.budget;
         let start = ep.history()[0];
         let now = Instant::now();
         let running =
@@ -654,7 +660,7 @@ impl AppState {
         *live = Live::Finished(Some(Box::new(Finished {
             history: res.visited_poses.clone(),
             terminal: TerminalInfo {
-                source: source_name(res.terminal_source),
+                source: res.terminal_source.to_string(),
                 reason: res.terminal_reason.clone(),
                 detail: res.terminal_detail.clone(),
             },

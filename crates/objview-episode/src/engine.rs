@@ -3,6 +3,8 @@
 //! when the episode ends. [`Episode`] is step-driven (the server drives it one request at a
 //! time); [`run_episode`] drives a local [`Planner`] to the end.
 //!
+//! The scoring of each view (SC, NSC, CD, PC, MS, #Views, PR) is [`crate::metrics`].
+//!
 //! Frames: every pose is in the object frame (normalized object units, roll in radians).
 
 use std::collections::BTreeMap;
@@ -17,16 +19,14 @@ use objview_views::ViewSpace;
 use crate::coverage::Targets;
 use crate::fusion::FusedCloud;
 use crate::grid::Domain;
-use crate::path::pose_distance;
+use crate::metrics;
 use crate::planner::{Action, Environment, EpisodeContext, Observation, OracleAccess, Planner};
 use crate::reference::Reference;
 use crate::result::{Checkpoint, EpisodeResult, Metrics, Step};
 use crate::settings::EpisodeSettings;
 use crate::stabilization::Stabilization;
 use crate::validate::{check_pose, check_view_pose};
-use crate::vocab::{
-    tau_key, wire_names, Budget, CheckpointKey, ExecutionMode, Family, StopReason, TerminalSource,
-};
+use crate::vocab::{wire_names, Budget, CheckpointKey, ExecutionMode, Family, StopReason, TerminalSource};
 use crate::EpisodeError;
 
 /// The hidden object of an episode, prepared once per (object, view space).
@@ -282,9 +282,7 @@ impl Episode {
 
     /// Adds planner time (seconds) to PR.
     pub fn add_runtime(&mut self, seconds: f64) {
-        if self.settings.record_timings {
-            self.runtime += seconds;
-        }
+        self.runtime = metrics::planning_runtime(self.runtime, seconds, self.settings.record_timings);
     }
 
     /// Applies one action (after the planner spent `planner_seconds` choosing it). A stop, an
@@ -377,7 +375,7 @@ impl Episode {
                 .all(|&d| self.checkpoints.contains_key(&CheckpointKey::Stabilized(d)))
     }
 
-    /// Renders, fuses and scores the view from `pose`.
+    /// Renders, fuses and scores the view from `pose` (the scoring: [`crate::metrics`]).
     fn observe(&mut self, pose: Pose, planner_seconds: f64) {
         let t0 = Instant::now();
         let cam = Camera::new(pose, self.scene.intrinsics);
@@ -386,55 +384,26 @@ impl Episode {
         let points = self.frame.observed_points();
         let delta = self.fused.insert(&points);
         let t_fuse = t0.elapsed().as_secs_f64();
-        // The two point sets are independent: updated concurrently on the rayon pool (one
-        // after the other on a one-thread pool).
-        let (gt, reference, fused) = (&mut self.gt, &mut self.reference, &self.fused);
-        let (to_gt, ()) = rayon::join(
-            || gt.update(fused, &delta.changed),
-            || {
-                reference.update(fused, &delta.changed);
-            },
-        );
+        let to_gt = metrics::update_distances(&mut self.gt, &mut self.reference, &self.fused, &delta.changed);
         let t_gt = t0.elapsed().as_secs_f64();
-        self.slot_gt_d2.resize(self.fused.len(), 0.0);
-        for (&s, d) in delta.changed.iter().zip(to_gt) {
-            self.slot_gt_d2[s as usize] = d;
-        }
-        let first_new = self.fused.len() - delta.new_slots;
-        for m in &mut self.ms {
-            m.add_fine_keys(self.fused.key[first_new..].iter().copied());
-        }
-        if let Some(prev) = self.history.last() {
-            self.path_cost += pose_distance(prev, &pose);
-        }
+        metrics::record_fused_to_gt(&mut self.slot_gt_d2, self.fused.len(), &delta.changed, to_gt);
+        metrics::add_new_voxels(&mut self.ms, &self.fused, delta.new_slots);
+        self.path_cost = metrics::path_cost(self.path_cost, self.history.last(), &pose);
         self.history.push(pose);
         let step = self.history.len() - 1;
         let taus = &self.settings.taus;
-        let sc = self.gt.coverage(taus);
-        let nsc = self.reference.coverage(taus);
-        let fused_mean = if self.fused.is_empty() {
-            0.0
-        } else {
-            self.slot_gt_d2.iter().sum::<f64>() / self.fused.len() as f64
-        };
-        let cd = if self.fused.is_empty() { f64::INFINITY } else { self.gt.mean_d2() + fused_mean };
-        let key = |v: Vec<f64>| taus.iter().zip(v).map(|(&t, x)| (tau_key(t), x)).collect::<BTreeMap<_, _>>();
-        let metrics = Metrics {
-            views: self.history.len(),
-            sc: key(sc),
-            nsc: key(nsc),
+        let sc = metrics::sc(&mut self.gt, taus);
+        let nsc = metrics::nsc(&mut self.reference, taus);
+        let cd = metrics::chamfer(&self.gt, &self.fused, &self.slot_gt_d2);
+        let scores = Metrics {
+            views: metrics::views(&self.history),
+            sc,
+            nsc,
             cd,
             path_cost: self.path_cost,
             runtime: self.runtime,
         };
-        let mut ms_voxels = BTreeMap::new();
-        let mut triggered = Vec::new();
-        for m in &mut self.ms {
-            ms_voxels.insert(tau_key(m.delta), m.count());
-            if m.end_step(step) {
-                triggered.push(CheckpointKey::Stabilized(m.delta));
-            }
-        }
+        let (ms_voxels, triggered) = metrics::stabilization_step(&mut self.ms, step);
         let (engine_seconds, stage_seconds) = if self.settings.record_timings {
             let total = t0.elapsed().as_secs_f64();
             (total, [t_render, t_fuse - t_render, t_gt - t_fuse, total - t_gt])
@@ -442,17 +411,17 @@ impl Episode {
             (0.0, [0.0; 4])
         };
         for key in triggered {
-            self.checkpoints.insert(key, Checkpoint { step, metrics: metrics.clone() });
+            self.checkpoints.insert(key, Checkpoint { step, metrics: scores.clone() });
         }
         let planner_views = step;
         if self.ks.contains(&planner_views) {
             self.checkpoints
-                .insert(CheckpointKey::Budget(planner_views), Checkpoint { step, metrics: metrics.clone() });
+                .insert(CheckpointKey::Budget(planner_views), Checkpoint { step, metrics: scores.clone() });
         }
         self.steps.push(Step {
             step,
             pose: pose.to_array(),
-            metrics,
+            metrics: scores,
             fused_points: self.fused.len(),
             ms_voxels,
             planner_seconds,

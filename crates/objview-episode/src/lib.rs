@@ -5,6 +5,8 @@
 //! - [`path`] — path cost under the shell distance.
 //! - [`fusion`] — incremental voxel-centroid fusion, on the sparse block grid of [`grid`].
 //! - [`coverage`] — exact nearest-fused distances → SC@τ, NSC@τ and CD.
+//! - [`metrics`] — the scoring of each view: SC, NSC, CD, PC, MS, #Views, PR (a table of their
+//!   definitions, SPEC sections and functions).
 //! - [`reference`] — the observable reference (NSC's denominator), cached on disk.
 //! - [`stabilization`] — MS@δ.
 //! - [`scene`] — loading the hidden object (mesh, ground truth, reference).
@@ -25,6 +27,7 @@ pub mod coverage;
 pub mod engine;
 pub mod fusion;
 pub mod grid;
+pub mod metrics;
 pub mod reference;
 pub mod result;
 pub mod scene;

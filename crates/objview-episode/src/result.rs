@@ -5,7 +5,8 @@
 //! `"0.03"`; [`tau_key`](crate::vocab::tau_key)) and checkpoints by their [`CheckpointKey`] (`K=5`, `MS@0.02`,
 //! `terminal`), which orders as its string; `BTreeMap` keeps keys sorted so the same episode
 //! always serializes to the same bytes. The family, execution mode, budget and terminal source
-//! are the typed names of [`crate::vocab`], written as the same strings as ever.
+//! are the typed names of [`crate::vocab`], written as the same strings as ever. What each
+//! metric is, and where it is computed, is tabled in [`crate::metrics`].
 
 use std::collections::BTreeMap;
 
@@ -18,11 +19,14 @@ use crate::vocab::{Budget, CheckpointKey, ExecutionMode, Family, TerminalSource}
 pub struct Metrics {
     /// Views taken so far, start view included (#Views).
     pub views: usize,
-    /// SC@τ: fraction of ground-truth points with a fused point closer than τ.
+    /// SC@τ: fraction of ground-truth points that have had a fused point closer than τ
+    /// (d² < τ²) at this view or an earlier one — sticky coverage, see
+    /// [`crate::coverage::Targets::coverage`].
     pub sc: BTreeMap<String, f64>,
-    /// NSC@τ: fraction of observable-reference points with a fused point closer than τ.
+    /// NSC@τ: the same sticky fraction over the observable-reference points.
     pub nsc: BTreeMap<String, f64>,
-    /// Chamfer distance: mean squared NN distance GT→fused plus fused→GT (units²).
+    /// Chamfer distance: mean squared NN distance GT→fused plus fused→GT over the current
+    /// fused cloud (units²).
     pub cd: f64,
     /// Shell path length from the start pose (normalized object units).
     pub path_cost: f64,

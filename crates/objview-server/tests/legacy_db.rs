@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use common::*;
 use objview_server::db::Db;
-use objview_server::state::CreateSpec;
+use objview_server::request::CreateSpec;
 use objview_server::ServerConfig;
 use serde_json::Value;
 

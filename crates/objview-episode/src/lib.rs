@@ -7,7 +7,7 @@
 //! - [`coverage`] — exact nearest-fused distances → SC@τ, NSC@τ and CD.
 //! - [`metrics`] — the scoring of each view: SC, NSC, CD, PC, MS, #Views, PR (a table of their
 //!   definitions, SPEC sections and functions).
-//! - [`reference`] — the observable reference (NSC's denominator), cached on disk.
+//! - [`reference`](mod@reference) — the observable reference (NSC's denominator), cached on disk.
 //! - [`stabilization`] — MS@δ.
 //! - [`scene`] — loading the hidden object (mesh, ground truth, reference).
 //! - [`scripted`] — a planner that plays a fixed action list (replays, tests, benchmarks).
@@ -49,10 +49,13 @@ pub use vocab::{Budget, CheckpointKey, ExecutionMode, Family, StopReason, Termin
 /// Errors of episode set-up (a running episode never fails: it ends with a terminal reason).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum EpisodeError {
+    /// The settings (or the start pose) are invalid.
     #[error("invalid episode settings: {0}")]
     Settings(String),
+    /// The scene cannot be set up (a start view that sees nothing, points outside the domain).
     #[error("episode set-up: {0}")]
     Setup(String),
+    /// Reading or writing a file failed: its path and the reason.
     #[error("{0}: {1}")]
     Io(String, String),
     /// A number of the result is NaN or infinite (it would be written as `null`); the field's

@@ -25,9 +25,15 @@ use crate::vocab::{Budget, ExecutionMode, Family, StopReason};
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum Action {
     /// Move the camera to `[cx, cy, cz, lx, ly, lz, roll]` (object frame, radians) and observe.
-    Move { pose: [f64; 7] },
+    Move {
+        /// The pose, raw.
+        pose: [f64; 7],
+    },
     /// End the episode with `reason` (one of [`StopReason`]'s wire names).
-    Stop { reason: String },
+    Stop {
+        /// The reason, raw.
+        reason: String,
+    },
 }
 
 impl Action {

@@ -81,8 +81,9 @@ pub struct Aggregate {
     pub terminal_fallback: usize,
     /// #Views (start view included).
     pub views: Stat,
-    /// NSC and SC at the report's τ.
+    /// NSC at the report's τ.
     pub nsc: Stat,
+    /// SC at the report's τ.
     pub sc: Stat,
     /// Chamfer distance.
     pub cd: Stat,
@@ -90,8 +91,9 @@ pub struct Aggregate {
     pub path_cost: Stat,
     /// Total planning time at the checkpoint (seconds).
     pub runtime: Stat,
-    /// NSC and SC at every τ common to all episodes (keys as in the results).
+    /// NSC at every τ common to all episodes (keys as in the results).
     pub nsc_by_tau: BTreeMap<String, Stat>,
+    /// SC at the same τs.
     pub sc_by_tau: BTreeMap<String, Stat>,
 }
 

@@ -162,10 +162,15 @@ pub enum DuplicateKind {
 pub struct Duplicate {
     /// Which rule dropped it.
     pub kind: DuplicateKind,
+    /// The dropped episode's object.
     pub uid: String,
+    /// Its method.
     pub method: String,
+    /// Its view space.
     pub view_space: String,
+    /// Its budget as written (`5`, `auto`).
     pub budget: String,
+    /// Its seed.
     pub seed: u64,
     /// The episode kept instead.
     pub kept: Source,

@@ -194,9 +194,11 @@ pub struct ReachTable {
     pub space_b: String,
     /// Rows in family order, then by method.
     pub rows: Vec<ReachRow>,
-    /// Methods with episodes in only one of the two spaces, or no setting in common.
+    /// Methods with episodes in space A only.
     pub only_a: Vec<String>,
+    /// Methods with episodes in space B only.
     pub only_b: Vec<String>,
+    /// Methods in both spaces without a setting in common.
     pub no_common_setting: Vec<String>,
 }
 

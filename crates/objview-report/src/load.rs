@@ -375,7 +375,7 @@ fn parse_result(value: &Value) -> Result<EpisodeResult, String> {
             let Some(v) = m.remove(name) else { continue };
             let fresh = loop {
                 i += 1;
-                let k = format!("K={}", usize::MAX - i);
+                let k = CheckpointKey::Budget(usize::MAX - i).to_string();
                 if !m.contains_key(&k) {
                     break k;
                 }

@@ -3,6 +3,8 @@
 //! when the episode ends. [`Episode`] is step-driven (the server drives it one request at a
 //! time); [`run_episode`] drives a local [`Planner`] to the end.
 //!
+//! The scoring of each view (SC, NSC, CD, PC, MS, #Views, PR) is [`crate::metrics`].
+//!
 //! Frames: every pose is in the object frame (normalized object units, roll in radians).
 
 use std::collections::BTreeMap;
@@ -17,16 +19,14 @@ use objview_views::ViewSpace;
 use crate::coverage::Targets;
 use crate::fusion::FusedCloud;
 use crate::grid::Domain;
-use crate::path::pose_distance;
-use crate::planner::{
-    Action, Budget, Environment, EpisodeContext, ExecutionMode, Observation, OracleAccess, Planner,
-    StopReason,
-};
+use crate::metrics;
+use crate::planner::{Action, Environment, EpisodeContext, Observation, OracleAccess, Planner};
 use crate::reference::Reference;
-use crate::result::{tau_key, Checkpoint, EpisodeResult, Metrics, Step, TerminalSource};
+use crate::result::{Checkpoint, EpisodeResult, Metrics, Step};
 use crate::settings::EpisodeSettings;
 use crate::stabilization::Stabilization;
 use crate::validate::{check_pose, check_view_pose};
+use crate::vocab::{wire_names, Budget, CheckpointKey, ExecutionMode, Family, StopReason, TerminalSource};
 use crate::EpisodeError;
 
 /// The hidden object of an episode, prepared once per (object, view space).
@@ -48,6 +48,7 @@ pub struct Scene {
     pub reference: Arc<Reference>,
     /// The metric grid domain (covers mesh, ground truth and reference).
     pub domain: Domain,
+    /// The camera intrinsics of every view (SPEC §2).
     pub intrinsics: Intrinsics,
     /// Fresh (never updated) ground-truth and reference target sets for the reference cap
     /// they were built with: every episode on the scene starts from a clone, sharing their
@@ -94,17 +95,24 @@ pub fn scene_domain(mesh: &Mesh, gt: &[[f64; 3]], h: f64) -> Domain {
 /// Method facts recorded in results.
 #[derive(Debug, Clone)]
 pub struct MethodInfo {
+    /// Method name (`rse`, a remote planner's name).
     pub name: String,
-    pub family: String,
+    /// Its family.
+    pub family: Family,
+    /// Its execution mode (decides how the budget applies).
     pub mode: ExecutionMode,
+    /// Its parameters.
     pub params: serde_json::Value,
 }
 
 /// How an episode ended.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Terminal {
+    /// Who ended it.
     pub source: TerminalSource,
+    /// The terminal reason (`plan_end`, `invalid_action`, `max_cap_reached`, …).
     pub reason: String,
+    /// Human-readable detail (empty when there is nothing to add).
     pub detail: String,
 }
 
@@ -124,7 +132,7 @@ pub struct Episode {
     ms: Vec<Stabilization>,
     history: Vec<Pose>,
     steps: Vec<Step>,
-    checkpoints: BTreeMap<String, Checkpoint>,
+    checkpoints: BTreeMap<CheckpointKey, Checkpoint>,
     ks: Vec<usize>,
     runtime: f64,
     path_cost: f64,
@@ -274,9 +282,7 @@ impl Episode {
 
     /// Adds planner time (seconds) to PR.
     pub fn add_runtime(&mut self, seconds: f64) {
-        if self.settings.record_timings {
-            self.runtime += seconds;
-        }
+        self.runtime = metrics::planning_runtime(self.runtime, seconds, self.settings.record_timings);
     }
 
     /// Applies one action (after the planner spent `planner_seconds` choosing it). A stop, an
@@ -294,7 +300,7 @@ impl Episode {
                 None => self.end(
                     TerminalSource::Benchmark,
                     "invalid_action",
-                    format!("unknown stop reason {reason:?} (valid: plan_end, candidate_exhausted, next_view_visited, next_view_infeasible)"),
+                    format!("unknown stop reason {reason:?} (valid: {})", wire_names(&StopReason::ALL)),
                 ),
             },
             Action::Move { pose } => {
@@ -313,7 +319,10 @@ impl Episode {
                         self.end(
                             TerminalSource::Benchmark,
                             "budget_reached",
-                            format!("the plan asked for view {} beyond its budget K = {k}", self.history.len()),
+                            format!(
+                                "the plan asked for view {} beyond its budget K = {k}",
+                                self.history.len()
+                            ),
                         );
                         return;
                     }
@@ -358,15 +367,15 @@ impl Episode {
     }
 
     fn all_checkpoints_reached(&self) -> bool {
-        self.ks.iter().all(|k| self.checkpoints.contains_key(&format!("K={k}")))
+        self.ks.iter().all(|&k| self.checkpoints.contains_key(&CheckpointKey::Budget(k)))
             && self
                 .settings
                 .ms_deltas
                 .iter()
-                .all(|d| self.checkpoints.contains_key(&format!("MS@{}", tau_key(*d))))
+                .all(|&d| self.checkpoints.contains_key(&CheckpointKey::Stabilized(d)))
     }
 
-    /// Renders, fuses and scores the view from `pose`.
+    /// Renders, fuses and scores the view from `pose` (the scoring: [`crate::metrics`]).
     fn observe(&mut self, pose: Pose, planner_seconds: f64) {
         let t0 = Instant::now();
         let cam = Camera::new(pose, self.scene.intrinsics);
@@ -375,73 +384,44 @@ impl Episode {
         let points = self.frame.observed_points();
         let delta = self.fused.insert(&points);
         let t_fuse = t0.elapsed().as_secs_f64();
-        // The two point sets are independent: updated concurrently on the rayon pool (one
-        // after the other on a one-thread pool).
-        let (gt, reference, fused) = (&mut self.gt, &mut self.reference, &self.fused);
-        let (to_gt, ()) = rayon::join(
-            || gt.update(fused, &delta.changed),
-            || {
-                reference.update(fused, &delta.changed);
-            },
-        );
+        let to_gt = metrics::update_distances(&mut self.gt, &mut self.reference, &self.fused, &delta.changed);
         let t_gt = t0.elapsed().as_secs_f64();
-        self.slot_gt_d2.resize(self.fused.len(), 0.0);
-        for (&s, d) in delta.changed.iter().zip(to_gt) {
-            self.slot_gt_d2[s as usize] = d;
-        }
-        let first_new = self.fused.len() - delta.new_slots;
-        for m in &mut self.ms {
-            m.add_fine_keys(self.fused.key[first_new..].iter().copied());
-        }
-        if let Some(prev) = self.history.last() {
-            self.path_cost += pose_distance(prev, &pose);
-        }
+        metrics::record_fused_to_gt(&mut self.slot_gt_d2, self.fused.len(), &delta.changed, to_gt);
+        metrics::add_new_voxels(&mut self.ms, &self.fused, delta.new_slots);
+        self.path_cost = metrics::path_cost(self.path_cost, self.history.last(), &pose);
         self.history.push(pose);
         let step = self.history.len() - 1;
         let taus = &self.settings.taus;
-        let sc = self.gt.coverage(taus);
-        let nsc = self.reference.coverage(taus);
-        let fused_mean = if self.fused.is_empty() {
-            0.0
-        } else {
-            self.slot_gt_d2.iter().sum::<f64>() / self.fused.len() as f64
-        };
-        let cd = if self.fused.is_empty() { f64::INFINITY } else { self.gt.mean_d2() + fused_mean };
-        let key = |v: Vec<f64>| taus.iter().zip(v).map(|(&t, x)| (tau_key(t), x)).collect::<BTreeMap<_, _>>();
-        let metrics = Metrics {
-            views: self.history.len(),
-            sc: key(sc),
-            nsc: key(nsc),
+        let sc = metrics::sc(&mut self.gt, taus);
+        let nsc = metrics::nsc(&mut self.reference, taus);
+        let cd = metrics::chamfer(&self.gt, &self.fused, &self.slot_gt_d2);
+        let scores = Metrics {
+            views: metrics::views(&self.history),
+            sc,
+            nsc,
             cd,
             path_cost: self.path_cost,
             runtime: self.runtime,
         };
-        let mut ms_voxels = BTreeMap::new();
-        let mut triggered = Vec::new();
-        for m in &mut self.ms {
-            ms_voxels.insert(tau_key(m.delta), m.count());
-            if m.end_step(step) {
-                triggered.push(format!("MS@{}", tau_key(m.delta)));
-            }
-        }
+        let (ms_voxels, triggered) = metrics::stabilization_step(&mut self.ms, step);
         let (engine_seconds, stage_seconds) = if self.settings.record_timings {
             let total = t0.elapsed().as_secs_f64();
             (total, [t_render, t_fuse - t_render, t_gt - t_fuse, total - t_gt])
         } else {
             (0.0, [0.0; 4])
         };
-        for name in triggered {
-            self.checkpoints.insert(name, Checkpoint { step, metrics: metrics.clone() });
+        for key in triggered {
+            self.checkpoints.insert(key, Checkpoint { step, metrics: scores.clone() });
         }
         let planner_views = step;
         if self.ks.contains(&planner_views) {
             self.checkpoints
-                .insert(format!("K={planner_views}"), Checkpoint { step, metrics: metrics.clone() });
+                .insert(CheckpointKey::Budget(planner_views), Checkpoint { step, metrics: scores.clone() });
         }
         self.steps.push(Step {
             step,
             pose: pose.to_array(),
-            metrics,
+            metrics: scores,
             fused_points: self.fused.len(),
             ms_voxels,
             planner_seconds,
@@ -457,10 +437,8 @@ impl Episode {
             self.end(TerminalSource::Exception, "interrupted", "the episode was not finished");
         }
         let last = self.steps.last().expect("the start view is always taken");
-        self.checkpoints.insert(
-            crate::result::TERMINAL_CHECKPOINT.into(),
-            Checkpoint { step: last.step, metrics: last.metrics.clone() },
-        );
+        self.checkpoints
+            .insert(CheckpointKey::Terminal, Checkpoint { step: last.step, metrics: last.metrics.clone() });
         let t = self.terminal.clone().unwrap_or(Terminal {
             source: TerminalSource::Exception,
             reason: "interrupted".into(),
@@ -470,10 +448,10 @@ impl Episode {
             settings: settings_record,
             uid: self.scene.uid.clone(),
             method: self.method.name.clone(),
-            family: self.method.family.clone(),
-            execution_mode: mode_name(self.method.mode).into(),
+            family: self.method.family,
+            execution_mode: self.method.mode,
             view_space: self.scene.space_name.clone(),
-            budget: self.budget.label(),
+            budget: self.budget,
             seed: self.seed,
             start_pose: self.start_pose.to_array(),
             visited_poses: self.history.iter().map(|p| p.to_array()).collect(),
@@ -491,15 +469,6 @@ impl Episode {
                 0.0
             },
         }
-    }
-}
-
-/// `iterative`, `budgeted_plan`, `set_cover_plan`.
-pub fn mode_name(m: ExecutionMode) -> &'static str {
-    match m {
-        ExecutionMode::Iterative => "iterative",
-        ExecutionMode::BudgetedPlan => "budgeted_plan",
-        ExecutionMode::SetCoverPlan => "set_cover_plan",
     }
 }
 
@@ -540,10 +509,7 @@ pub fn run_episode(
 ) -> Result<EpisodeResult, EpisodeError> {
     let method = MethodInfo {
         name: planner.name().to_string(),
-        family: serde_json::to_value(planner.family())
-            .ok()
-            .and_then(|v| v.as_str().map(str::to_string))
-            .unwrap_or_default(),
+        family: planner.family(),
         mode: planner.execution_mode(),
         params: planner.params(),
     };

@@ -35,7 +35,7 @@ pub struct FusedCloud {
     pub key: Vec<[i32; 3]>,
     /// Domain block index of each slot.
     pub block: Vec<u32>,
-    /// Step at which each slot last changed (see [`FusedCloud::changed_at`]).
+    /// Step at which each slot last changed (see [`FusedCloud::changed_now`]).
     pub stamp: Vec<u32>,
     /// The occupied blocks by superblock (far nearest searches).
     pub supergrid: SuperGrid,

@@ -4,8 +4,10 @@
 //!
 //! Frames and units: every pose is a 7-number [`Pose`] in the object frame (normalized object
 //! units, roll in radians); depth is camera-frame z in the same units, 0 where nothing was hit.
+//!
+//! The names planners declare and use (family, execution mode, budget, stop reason) are defined
+//! in [`crate::vocab`].
 
-use std::fmt;
 use std::sync::Arc;
 
 use objview_geom::hash::{splitmix64, Fnv};
@@ -13,50 +15,7 @@ use objview_geom::{Mesh, Pose};
 use objview_render::Intrinsics;
 use serde::{Deserialize, Serialize};
 
-/// The reasons a planner may give for stopping (SPEC §5). Anything else is an invalid action.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum StopReason {
-    /// A finite plan has been executed to its end.
-    PlanEnd,
-    /// No candidate is left to choose from.
-    CandidateExhausted,
-    /// The planner's next view is one it already visited.
-    NextViewVisited,
-    /// The planner's next view is not feasible in the view space.
-    NextViewInfeasible,
-}
-
-impl StopReason {
-    /// All valid reasons.
-    pub const ALL: [StopReason; 4] = [
-        StopReason::PlanEnd,
-        StopReason::CandidateExhausted,
-        StopReason::NextViewVisited,
-        StopReason::NextViewInfeasible,
-    ];
-
-    /// The wire name (`plan_end`, …).
-    pub fn as_str(self) -> &'static str {
-        match self {
-            StopReason::PlanEnd => "plan_end",
-            StopReason::CandidateExhausted => "candidate_exhausted",
-            StopReason::NextViewVisited => "next_view_visited",
-            StopReason::NextViewInfeasible => "next_view_infeasible",
-        }
-    }
-
-    /// Parses a wire name; `None` for an unknown reason.
-    pub fn parse(s: &str) -> Option<StopReason> {
-        StopReason::ALL.into_iter().find(|r| r.as_str() == s)
-    }
-}
-
-impl fmt::Display for StopReason {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
+use crate::vocab::{Budget, ExecutionMode, Family, StopReason};
 
 /// What a planner answers. It is kept *raw* (seven numbers, a reason string) because remote
 /// planners send exactly that: the environment validates it (finite numbers, centre and look-at
@@ -66,9 +25,15 @@ impl fmt::Display for StopReason {
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum Action {
     /// Move the camera to `[cx, cy, cz, lx, ly, lz, roll]` (object frame, radians) and observe.
-    Move { pose: [f64; 7] },
+    Move {
+        /// The pose, raw.
+        pose: [f64; 7],
+    },
     /// End the episode with `reason` (one of [`StopReason`]'s wire names).
-    Stop { reason: String },
+    Stop {
+        /// The reason, raw.
+        reason: String,
+    },
 }
 
 impl Action {
@@ -80,76 +45,6 @@ impl Action {
     /// `Stop` with a valid reason.
     pub fn stop(reason: StopReason) -> Action {
         Action::Stop { reason: reason.as_str().to_string() }
-    }
-}
-
-/// Method family, as in the paper's Table 1 (plus the ground-truth oracle and sanity baselines).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Family {
-    Classical,
-    Learned,
-    Hybrid,
-    /// Reads the ground truth (only for diagnostics).
-    Oracle,
-    /// Sanity baselines (uniform random).
-    Baseline,
-}
-
-impl Family {
-    /// Display name used in tables (`Classical`, …).
-    pub fn title(self) -> &'static str {
-        match self {
-            Family::Classical => "Classical",
-            Family::Learned => "Learned",
-            Family::Hybrid => "Hybrid",
-            Family::Oracle => "Oracle",
-            Family::Baseline => "Baseline",
-        }
-    }
-}
-
-/// How a planner runs (paper §6.1): this decides how budgets apply (SPEC §5).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ExecutionMode {
-    /// Chooses one view at a time. Runs once per episode; the budget checkpoints and MS@δ are
-    /// read off that run, which stops at `enough_info` or the cap.
-    Iterative,
-    /// Plans a fixed number K of views (needs a fixed budget).
-    BudgetedPlan,
-    /// Plans a finite view set and stops by itself (`plan_end`); the automatic setting.
-    SetCoverPlan,
-}
-
-/// The budget protocol of an episode (SPEC §5).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Budget {
-    /// K planner-selected views after the start view.
-    Fixed(usize),
-    /// The planner's own stop (finite plans) or MS@0.02 (iterative planners).
-    Auto,
-}
-
-impl Budget {
-    /// `"5"`, `"30"`, `"auto"`.
-    pub fn label(self) -> String {
-        match self {
-            Budget::Fixed(k) => k.to_string(),
-            Budget::Auto => "auto".into(),
-        }
-    }
-
-    /// Parses `auto` or a positive integer.
-    pub fn parse(s: &str) -> Result<Budget, String> {
-        if s == "auto" {
-            return Ok(Budget::Auto);
-        }
-        match s.parse::<usize>() {
-            Ok(k) if k >= 1 => Ok(Budget::Fixed(k)),
-            _ => Err(format!("budget must be `auto` or a positive integer, got {s:?}")),
-        }
     }
 }
 
@@ -257,7 +152,7 @@ pub trait Planner: Send {
 pub fn episode_seed(seed: u64, object_id: &str, view_space: &str, budget: Budget) -> u64 {
     let mut h = Fnv::default();
     for field in
-        [&seed.to_le_bytes()[..], object_id.as_bytes(), view_space.as_bytes(), budget.label().as_bytes()]
+        [&seed.to_le_bytes()[..], object_id.as_bytes(), view_space.as_bytes(), budget.to_string().as_bytes()]
     {
         h.eat(field);
         h.eat(&[0xff]); // field separator: ("ab", "c") ≠ ("a", "bc")
@@ -277,15 +172,6 @@ mod tests {
         assert_eq!(StopReason::parse("done"), None);
         let a = Action::stop(StopReason::PlanEnd);
         assert_eq!(serde_json::to_string(&a).unwrap(), r#"{"type":"stop","reason":"plan_end"}"#);
-    }
-
-    #[test]
-    fn budgets_parse() {
-        assert_eq!(Budget::parse("auto"), Ok(Budget::Auto));
-        assert_eq!(Budget::parse("30"), Ok(Budget::Fixed(30)));
-        assert!(Budget::parse("0").is_err());
-        assert!(Budget::parse("-3").is_err());
-        assert!(Budget::parse("five").is_err());
     }
 
     #[test]

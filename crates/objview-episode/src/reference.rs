@@ -20,8 +20,9 @@ use serde::{Deserialize, Serialize};
 use crate::coverage::Targets;
 use crate::fusion::FusedCloud;
 use crate::grid::Domain;
-use crate::result::{tau_key, ReferenceInfo};
+use crate::result::ReferenceInfo;
 use crate::settings::EpisodeSettings;
+use crate::vocab::tau_key;
 use crate::EpisodeError;
 
 /// The observable reference.

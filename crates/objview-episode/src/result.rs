@@ -2,26 +2,31 @@
 //! shared with `objview report`, the server and the Python client.
 //!
 //! Per-τ maps are keyed by τ written as a string with two decimals (`"0.01"`, `"0.02"`,
-//! `"0.03"`); `BTreeMap` keeps keys sorted so the same episode always serializes to the same
-//! bytes.
+//! `"0.03"`; [`tau_key`](crate::vocab::tau_key)) and checkpoints by their [`CheckpointKey`] (`K=5`, `MS@0.02`,
+//! `terminal`), which orders as its string; `BTreeMap` keeps keys sorted so the same episode
+//! always serializes to the same bytes. The family, execution mode, budget and terminal source
+//! are the typed names of [`crate::vocab`], written as the same strings as ever. What each
+//! metric is, and where it is computed, is tabled in [`crate::metrics`].
 
 use std::collections::BTreeMap;
 
-/// The key of the checkpoint every episode has: the metrics after its last view.
-pub const TERMINAL_CHECKPOINT: &str = "terminal";
-
 use serde::{Deserialize, Serialize};
+
+use crate::vocab::{Budget, CheckpointKey, ExecutionMode, Family, TerminalSource};
 
 /// Metrics after one view (also the payload of a checkpoint).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Metrics {
     /// Views taken so far, start view included (#Views).
     pub views: usize,
-    /// SC@τ: fraction of ground-truth points with a fused point closer than τ.
+    /// SC@τ: fraction of ground-truth points that have had a fused point closer than τ
+    /// (d² < τ²) at this view or an earlier one — sticky coverage, see
+    /// [`crate::coverage::Targets::coverage`].
     pub sc: BTreeMap<String, f64>,
-    /// NSC@τ: fraction of observable-reference points with a fused point closer than τ.
+    /// NSC@τ: the same sticky fraction over the observable-reference points.
     pub nsc: BTreeMap<String, f64>,
-    /// Chamfer distance: mean squared NN distance GT→fused plus fused→GT (units²).
+    /// Chamfer distance: mean squared NN distance GT→fused plus fused→GT over the current
+    /// fused cloud (units²).
     pub cd: f64,
     /// Shell path length from the start pose (normalized object units).
     pub path_cost: f64,
@@ -36,6 +41,7 @@ pub struct Step {
     pub step: usize,
     /// The executed pose `[cx, cy, cz, lx, ly, lz, roll]`.
     pub pose: [f64; 7],
+    /// The metrics after this view (flattened into the step's JSON object).
     #[serde(flatten)]
     pub metrics: Metrics,
     /// Fused points (voxel 0.005 centroids).
@@ -52,25 +58,16 @@ pub struct Step {
     pub stage_seconds: [f64; 4],
 }
 
-/// A named checkpoint (`K=5`, `MS@0.02`, `terminal`, …): the metrics at the view where it was
-/// reached, and that view's step index.
+/// A named checkpoint (`K=5`, `MS@0.02`, `terminal`, …; its name is the key of
+/// [`EpisodeResult::checkpoints`]): the metrics at the view where it was reached, and that
+/// view's step index.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Checkpoint {
+    /// The step index of the view (0 = start view).
     pub step: usize,
+    /// The metrics after that view (flattened into the checkpoint's JSON object).
     #[serde(flatten)]
     pub metrics: Metrics,
-}
-
-/// Where the end of an episode came from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum TerminalSource {
-    /// The planner stopped (`terminal_reason` is its stop reason).
-    AlgorithmStop,
-    /// The benchmark ended it: `invalid_action`, `max_cap_reached` or `enough_info`.
-    Benchmark,
-    /// The planner failed (`planner_error`) or a remote planner timed out (`timeout`).
-    Exception,
 }
 
 /// The observable reference of (object, view space) used for NSC.
@@ -97,33 +94,41 @@ pub struct ReferenceInfo {
 pub struct EpisodeResult {
     /// Every setting and version that produced this line.
     pub settings: serde_json::Value,
+    /// The object's id.
     pub uid: String,
+    /// Method name (`rse`, `random-tsp`, a remote planner's name).
     pub method: String,
     /// `classical`, `learned`, `hybrid`, `oracle`, `baseline`.
-    pub family: String,
+    pub family: Family,
     /// `iterative`, `budgeted_plan`, `set_cover_plan`.
-    pub execution_mode: String,
+    pub execution_mode: ExecutionMode,
+    /// View-space name (`whole`, `quarter`, a rule file's stem).
     pub view_space: String,
     /// `"5"`, `"30"`, `"auto"`.
-    pub budget: String,
+    pub budget: Budget,
     /// The user seed (the planner got [`crate::episode_seed`] of it).
     pub seed: u64,
+    /// The start pose `[cx, cy, cz, lx, ly, lz, roll]`.
     pub start_pose: [f64; 7],
     /// Every executed pose, start included, in order.
     pub visited_poses: Vec<[f64; 7]>,
+    /// `algorithm_stop`, `benchmark`, `exception`.
     pub terminal_source: TerminalSource,
     /// `plan_end`, `candidate_exhausted`, `next_view_visited`, `next_view_infeasible`,
     /// `invalid_action`, `max_cap_reached`, `enough_info`, `planner_error`, `timeout`.
     pub terminal_reason: String,
     /// Human-readable detail (why an action was invalid, the planner's error message).
     pub terminal_detail: String,
+    /// One record per executed view, start view first.
     pub steps: Vec<Step>,
     /// Named checkpoints, as reached; always `terminal`.
-    pub checkpoints: BTreeMap<String, Checkpoint>,
+    pub checkpoints: BTreeMap<CheckpointKey, Checkpoint>,
+    /// The observable reference NSC was measured against.
     pub reference: ReferenceInfo,
     /// Ground-truth points (|GT|) and where they came from: `sampled(seed=…, count=…)` or
     /// `file:NAME` (the cloud file's name, never its path).
     pub gt_points: usize,
+    /// See `gt_points`.
     pub gt_source: String,
     /// Wall time of the episode (seconds), set-up included.
     pub wall_seconds: f64,
@@ -186,11 +191,6 @@ impl EpisodeResult {
     }
 }
 
-/// A τ written as a key: two decimals (`0.02` → `"0.02"`).
-pub fn tau_key(tau: f64) -> String {
-    format!("{tau:.2}")
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -215,10 +215,10 @@ mod tests {
             settings: serde_json::json!({}),
             uid: "o".into(),
             method: "m".into(),
-            family: "classical".into(),
-            execution_mode: "iterative".into(),
+            family: Family::Classical,
+            execution_mode: ExecutionMode::Iterative,
             view_space: "whole".into(),
-            budget: "auto".into(),
+            budget: Budget::Auto,
             seed: 0,
             start_pose: step.pose,
             visited_poses: vec![step.pose],
@@ -226,7 +226,7 @@ mod tests {
             terminal_reason: "plan_end".into(),
             terminal_detail: String::new(),
             checkpoints: BTreeMap::from([(
-                "terminal".to_string(),
+                CheckpointKey::Terminal,
                 Checkpoint { step: 0, metrics: metrics(cd) },
             )]),
             steps: vec![step],
@@ -253,7 +253,7 @@ mod tests {
     fn the_first_non_finite_number_is_named_by_its_path() {
         assert_eq!(result(f64::INFINITY).non_finite().as_deref(), Some("steps[0].cd"));
         let mut r = result(0.1);
-        r.checkpoints.get_mut("terminal").unwrap().metrics.path_cost = f64::NAN;
+        r.checkpoints.get_mut(&CheckpointKey::Terminal).unwrap().metrics.path_cost = f64::NAN;
         assert_eq!(r.non_finite().as_deref(), Some("checkpoints.terminal.path_cost"));
         r.visited_poses[0][6] = f64::NEG_INFINITY;
         assert_eq!(r.non_finite().as_deref(), Some("visited_poses[0][6]"));

@@ -2,10 +2,8 @@
 //! recorded pose sequence (a result line's `visited_poses`) through the environment, and to
 //! drive tests and benchmarks with known views.
 
-use crate::planner::{
-    Action, Environment, EpisodeContext, ExecutionMode, Family, Observation, Planner, PlannerError,
-    StopReason,
-};
+use crate::planner::{Action, Environment, EpisodeContext, Observation, Planner, PlannerError};
+use crate::vocab::{ExecutionMode, Family, StopReason};
 use objview_geom::Pose;
 
 /// The scripted planner (name `scripted`, family baseline).

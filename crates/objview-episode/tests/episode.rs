@@ -5,7 +5,7 @@
 use std::sync::{Arc, OnceLock};
 
 use objview_episode::{
-    run_episode, scene_from_parts, Action, Budget, Environment, EpisodeContext, EpisodeResult,
+    run_episode, scene_from_parts, Action, Budget, CheckpointKey, Environment, EpisodeContext, EpisodeResult,
     EpisodeSettings, ExecutionMode, Family, Observation, Planner, PlannerError, Scene, Scripted, StopReason,
 };
 use objview_geom::cloud::sample_surface;
@@ -69,8 +69,13 @@ fn moves(n: usize) -> Vec<Action> {
     tammes360().iter().take(n).map(Action::move_to).collect()
 }
 
+/// The checkpoint key named `name` (`K=5`, `MS@0.02`, `terminal`).
+fn key(name: &str) -> CheckpointKey {
+    name.parse().unwrap()
+}
+
 fn nsc(r: &EpisodeResult, cp: &str, tau: &str) -> f64 {
-    r.checkpoints[cp].metrics.nsc[tau]
+    r.checkpoints[&key(cp)].metrics.nsc[tau]
 }
 
 #[test]
@@ -87,7 +92,7 @@ fn all_feasible_reference_views_give_nsc_one_and_coverage_never_decreases() {
             assert_eq!(nsc(&r, "terminal", tau), 1.0, "{space} NSC@{tau}");
         }
         // SC of the whole sphere from every direction is (nearly) 1; the quarter sees less.
-        let sc_end = r.checkpoints["terminal"].metrics.sc["0.02"];
+        let sc_end = r.checkpoints[&CheckpointKey::Terminal].metrics.sc["0.02"];
         assert!(if space == "whole" { sc_end > 0.999 } else { sc_end < 0.95 }, "{space} SC {sc_end}");
         // The reference's own SC (observable surface ratio) is what the episode reaches.
         let obs = r.reference.observable_sc["0.02"];
@@ -113,7 +118,7 @@ fn sphere_start_view_matches_geometry() {
         (r.terminal_source, r.terminal_reason.as_str()),
         (objview_episode::TerminalSource::AlgorithmStop, "plan_end")
     );
-    let m = &r.checkpoints["terminal"].metrics;
+    let m = &r.checkpoints[&CheckpointKey::Terminal].metrics;
     assert_eq!(m.views, 1);
     assert_eq!(m.path_cost, 0.0);
     // From distance 3 the visible cap of a unit sphere is cos θ ≥ 1/3: area fraction 1/3.
@@ -146,7 +151,7 @@ fn invalid_actions_end_the_episode_and_keep_views() {
         assert_eq!(r.terminal_source, objview_episode::TerminalSource::Benchmark);
         assert!(r.terminal_detail.contains(why), "{why}: {}", r.terminal_detail);
         assert_eq!(r.visited_poses.len(), 3, "views taken before are kept");
-        assert_eq!(r.checkpoints["terminal"].metrics.views, 3);
+        assert_eq!(r.checkpoints[&CheckpointKey::Terminal].metrics.views, 3);
         assert_eq!(r.non_finite(), None, "{why}");
         let line = serde_json::to_string(&r).unwrap();
         assert!(!line.contains("null"), "{why}: {line}");
@@ -192,10 +197,10 @@ fn budgets_cap_and_enough_info() {
     let r = run("whole", moves(200), ExecutionMode::Iterative, Budget::Fixed(7), &settings());
     assert_eq!(r.terminal_reason, "enough_info");
     for k in ["K=5", "K=7", "K=10", "K=30", "K=50", "MS@0.01", "MS@0.02", "MS@0.03", "terminal"] {
-        assert!(r.checkpoints.contains_key(k), "missing checkpoint {k}");
+        assert!(r.checkpoints.contains_key(&key(k)), "missing checkpoint {k}");
     }
-    assert_eq!(r.checkpoints["K=5"].metrics.views, 6);
-    assert_eq!(r.checkpoints["K=50"].metrics.views, 51);
+    assert_eq!(r.checkpoints[&CheckpointKey::Budget(5)].metrics.views, 6);
+    assert_eq!(r.checkpoints[&CheckpointKey::Budget(50)].metrics.views, 51);
     assert_eq!(r.visited_poses.len(), 51, "ends as soon as K=50 (the last checkpoint) exists");
     // MS@δ: the third stable step in a row, recomputed from the recorded voxel counts.
     for d in ["0.01", "0.02", "0.03"] {
@@ -210,7 +215,7 @@ fn budgets_cap_and_enough_info() {
                 break;
             }
         }
-        assert_eq!(Some(r.checkpoints[&format!("MS@{d}")].step), want, "MS@{d}");
+        assert_eq!(Some(r.checkpoints[&key(&format!("MS@{d}"))].step), want, "MS@{d}");
     }
     // Cap: 129 views at most.
     let s = EpisodeSettings { enough_info: false, ..settings() };
@@ -218,8 +223,8 @@ fn budgets_cap_and_enough_info() {
     assert_eq!((r.terminal_reason.as_str(), r.visited_poses.len()), ("max_cap_reached", 129));
     // A plan shorter than a checkpoint never reaches it.
     let r = run("whole", moves(3), ExecutionMode::SetCoverPlan, Budget::Auto, &settings());
-    assert!(!r.checkpoints.contains_key("K=5"));
-    assert_eq!(r.checkpoints["terminal"].metrics.views, 4);
+    assert!(!r.checkpoints.contains_key(&CheckpointKey::Budget(5)));
+    assert_eq!(r.checkpoints[&CheckpointKey::Terminal].metrics.views, 4);
 }
 
 #[test]

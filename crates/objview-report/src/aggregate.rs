@@ -7,7 +7,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use objview_episode::result::Metrics;
-use objview_episode::ExecutionMode;
+use objview_episode::{CheckpointKey, ExecutionMode, Family};
 use serde::Serialize;
 
 use crate::load::Episode;
@@ -44,7 +44,7 @@ pub type GroupKey = (Setting, String, String);
 pub fn group_picks<'a>(
     episodes: &'a [Episode],
     settings: &[Setting],
-    auto_checkpoint: &str,
+    auto_checkpoint: &CheckpointKey,
 ) -> BTreeMap<GroupKey, Vec<Pick<'a>>> {
     let mut groups: BTreeMap<GroupKey, Vec<Pick<'a>>> = BTreeMap::new();
     for &setting in settings {
@@ -67,8 +67,8 @@ pub struct Aggregate {
     pub view_space: String,
     /// Method name as in the results.
     pub method: String,
-    /// snake_case family as in the results (`classical`, …).
-    pub family: String,
+    /// The family, as in the results (`classical`, …).
+    pub family: Family,
     /// Execution mode (decides the checkpoint of each setting).
     pub execution_mode: ExecutionMode,
     /// Episodes.
@@ -81,8 +81,9 @@ pub struct Aggregate {
     pub terminal_fallback: usize,
     /// #Views (start view included).
     pub views: Stat,
-    /// NSC and SC at the report's τ.
+    /// NSC at the report's τ.
     pub nsc: Stat,
+    /// SC at the report's τ.
     pub sc: Stat,
     /// Chamfer distance.
     pub cd: Stat,
@@ -90,8 +91,9 @@ pub struct Aggregate {
     pub path_cost: Stat,
     /// Total planning time at the checkpoint (seconds).
     pub runtime: Stat,
-    /// NSC and SC at every τ common to all episodes (keys as in the results).
+    /// NSC at every τ common to all episodes (keys as in the results).
     pub nsc_by_tau: BTreeMap<String, Stat>,
+    /// SC at the same τs.
     pub sc_by_tau: BTreeMap<String, Stat>,
 }
 
@@ -129,8 +131,8 @@ pub fn aggregate(key: &GroupKey, picks: &[Pick], tau: &str, taus: &[String]) -> 
         setting: key.0,
         view_space: key.1.clone(),
         method: key.2.clone(),
-        family: first.result.family.clone(),
-        execution_mode: first.mode,
+        family: first.result.family,
+        execution_mode: first.result.execution_mode,
         n: picks.len(),
         objects: objects.len(),
         from_step: count(PickSource::Step),

@@ -9,7 +9,7 @@
 //! - [`select`]: budget settings and the checkpoint each episode contributes to each;
 //! - [`aggregate`]: per-(setting, view space, method) means and standard deviations;
 //! - [`tables`]: the data of Tables 2–5 and the terminal summary; [`render`]: their Markdown and
-//!   CSV; [`format`]: number formats, time bins, pipe tables;
+//!   CSV; [`format`](mod@format): number formats, time bins, pipe tables;
 //! - [`plots`]: the figures (PNG + SVG via `objview_plot`, data in `figures.json`);
 //! - [`report`]: [`build_report`] and [`Report::write`].
 //!

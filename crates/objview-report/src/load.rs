@@ -2,8 +2,9 @@
 //!
 //! Files are read in the order given, lines in file order. A line is one of:
 //! - an episode result: checked here for what the tables rely on (a known execution mode, a
-//!   valid budget, a `terminal` checkpoint, NSC/SC at the report's τ in every checkpoint and
-//!   step), so that later stages never meet a missing value;
+//!   valid budget, a known family, checkpoint names the result format knows, a `terminal`
+//!   checkpoint, NSC/SC at the report's τ in every checkpoint and step), so that later stages
+//!   never meet a missing value;
 //! - a failure line (a JSON object with an `error` field, written for an episode that could
 //!   not run): kept, counted and listed, never fatal;
 //! - blank: skipped.
@@ -27,9 +28,9 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 
 use objview_episode::result::EpisodeResult;
-use objview_episode::{Budget, ExecutionMode};
+use objview_episode::{Budget, CheckpointKey, ExecutionMode, Family};
 use serde::Serialize;
-use serde_json::Value;
+use serde_json::{json, Value};
 
 use crate::ReportError;
 
@@ -64,10 +65,6 @@ pub struct Source {
 pub struct Episode {
     /// Where it was read.
     pub source: Source,
-    /// `execution_mode`, parsed.
-    pub mode: ExecutionMode,
-    /// `budget`, parsed.
-    pub budget: Budget,
     /// The episode as read.
     pub result: EpisodeResult,
 }
@@ -113,9 +110,13 @@ impl SkippedLine {
 /// line does not say.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct LineKeys {
+    /// The object's id.
     pub uid: String,
+    /// The method (a failure line of `objview run` names it `planner`).
     pub method: String,
+    /// The view space.
     pub view_space: String,
+    /// The budget as written (`5`, `auto`).
     pub budget: String,
     /// The seed, when the line has one.
     pub seed: Option<u64>,
@@ -128,7 +129,7 @@ impl LineKeys {
             uid: r.uid.clone(),
             method: r.method.clone(),
             view_space: r.view_space.clone(),
-            budget: r.budget.clone(),
+            budget: r.budget.to_string(),
             seed: Some(r.seed),
         }
     }
@@ -161,10 +162,15 @@ pub enum DuplicateKind {
 pub struct Duplicate {
     /// Which rule dropped it.
     pub kind: DuplicateKind,
+    /// The dropped episode's object.
     pub uid: String,
+    /// Its method.
     pub method: String,
+    /// Its view space.
     pub view_space: String,
+    /// Its budget as written (`5`, `auto`).
     pub budget: String,
+    /// Its seed.
     pub seed: u64,
     /// The episode kept instead.
     pub kept: Source,
@@ -269,11 +275,11 @@ pub fn load_results(paths: &[PathBuf], tau: &str) -> Result<Loaded, ReportError>
     skipped.sort_by_key(|s| s.source);
     let (mut episodes, duplicates) = deduplicate(raw);
     episodes.sort_by(|a, b| sort_key(a).cmp(&sort_key(b)));
-    let results: BTreeSet<(&str, &str, &str, &str, u64)> = episodes
+    let results: BTreeSet<(&str, &str, &str, String, u64)> = episodes
         .iter()
         .map(|e| {
             let r = &e.result;
-            (r.uid.as_str(), r.method.as_str(), r.view_space.as_str(), r.budget.as_str(), r.seed)
+            (r.uid.as_str(), r.method.as_str(), r.view_space.as_str(), r.budget.to_string(), r.seed)
         })
         .collect();
     for f in &mut failures {
@@ -283,7 +289,7 @@ pub fn load_results(paths: &[PathBuf], tau: &str) -> Result<Loaded, ReportError>
                 k.uid.as_str(),
                 k.method.as_str(),
                 k.view_space.as_str(),
-                k.budget.as_str(),
+                k.budget.clone(),
                 seed,
             ))
         });
@@ -313,19 +319,89 @@ fn read_line(value: Value, source: Source, tau: &str) -> Result<Line, Box<Skippe
             "an `objview annotate` line, not an episode result (give annotation files as annotations)".into(),
         ));
     }
-    let result: EpisodeResult = match serde_json::from_value(value.clone()) {
-        Ok(r) => r,
-        Err(e) => return Err(skip(&value, format!("not an episode result ({e})"))),
-    };
-    match check(result, source, tau) {
+    match parse_result(&value).and_then(|result| check(result, source, tau)) {
         Ok(e) => Ok(Line::Episode(Box::new(e))),
         Err(reason) => Err(skip(&value, reason)),
     }
 }
 
-fn sort_key(e: &Episode) -> (&str, &str, &str, u64, &str, Source) {
+/// A stand-in that each typed name of a result reads, and whether a string is one.
+type Name = (&'static str, &'static str, fn(&str) -> bool);
+
+/// The typed names of a result's top level, in the order their errors are reported.
+const NAMES: [Name; 3] = [
+    ("execution_mode", "iterative", |s| s.parse::<ExecutionMode>().is_ok()),
+    ("budget", "auto", |s| s.parse::<Budget>().is_ok()),
+    ("family", "classical", |s| s.parse::<Family>().is_ok()),
+];
+
+/// A JSON object as an episode result, or why it is not one. The family, execution mode, budget
+/// and checkpoint names of [`EpisodeResult`] are typed; the reason a line gets is what it was
+/// when they were plain strings checked afterwards: a line that fails for another reason too (a
+/// missing field, a `null` number) is "not an episode result" with that reason, else an unknown
+/// execution mode, else a bad budget; then (never accepted since the names are typed) an unknown
+/// family or checkpoint name.
+fn parse_result(value: &Value) -> Result<EpisodeResult, String> {
+    let error = match serde_json::from_value::<EpisodeResult>(value.clone()) {
+        Ok(r) => return Ok(r),
+        Err(e) => e,
+    };
+    // The names that are strings their type does not read.
+    let bad: Vec<(&str, String)> = NAMES
+        .iter()
+        .filter_map(|&(field, _, known)| match value.get(field) {
+            Some(Value::String(s)) if !known(s) => Some((field, s.clone())),
+            _ => None,
+        })
+        .collect();
+    let checkpoints = value.get("checkpoints").and_then(Value::as_object);
+    let bad_checkpoints: Vec<String> = checkpoints
+        .map(|m| m.keys().filter(|k| k.parse::<CheckpointKey>().is_err()).cloned().collect())
+        .unwrap_or_default();
+    let not_a_result = |e: serde_json::Error| format!("not an episode result ({e})");
+    if bad.is_empty() && bad_checkpoints.is_empty() {
+        return Err(not_a_result(error));
+    }
+    // The same line with valid stand-ins for those names: does it fail for another reason?
+    let mut stand_in = value.clone();
+    for &(field, valid, _) in &NAMES {
+        if bad.iter().any(|(f, _)| *f == field) {
+            stand_in[field] = json!(valid);
+        }
+    }
+    if let Some(Value::Object(m)) = stand_in.get_mut("checkpoints") {
+        let mut i = 0;
+        for name in &bad_checkpoints {
+            let Some(v) = m.remove(name) else { continue };
+            let fresh = loop {
+                i += 1;
+                let k = CheckpointKey::Budget(usize::MAX - i).to_string();
+                if !m.contains_key(&k) {
+                    break k;
+                }
+            };
+            m.insert(fresh, v);
+        }
+    }
+    if let Err(e) = serde_json::from_value::<EpisodeResult>(stand_in) {
+        return Err(not_a_result(e));
+    }
+    Err(match bad.first() {
+        Some(("execution_mode", s)) => {
+            format!("unknown execution_mode '{s}' (iterative, budgeted_plan or set_cover_plan)")
+        }
+        Some(("budget", s)) => s.parse::<Budget>().err().map(|e| e.to_string()).unwrap_or_default(),
+        Some((_, s)) => format!("unknown family '{s}' (classical, learned, hybrid, oracle or baseline)"),
+        None => format!(
+            "unknown checkpoint name '{}' (K=k, MS@δ such as MS@0.02, or terminal)",
+            bad_checkpoints.join("', '")
+        ),
+    })
+}
+
+fn sort_key(e: &Episode) -> (&str, &str, &str, u64, String, Source) {
     let r = &e.result;
-    (&r.uid, &r.method, &r.view_space, r.seed, &r.budget, e.source)
+    (&r.uid, &r.method, &r.view_space, r.seed, r.budget.to_string(), e.source)
 }
 
 /// A failure line's fields: top-level keys, else the same keys in its `settings` object (where
@@ -361,20 +437,13 @@ fn line_keys(v: &Value) -> LineKeys {
     }
 }
 
-/// The checks of the module docs; the reason on failure.
+/// The checks of the module docs that typing the result ([`parse_result`]) leaves; the reason on
+/// failure.
 fn check(result: EpisodeResult, source: Source, tau: &str) -> Result<Episode, String> {
-    let mode: ExecutionMode =
-        serde_json::from_value(Value::String(result.execution_mode.clone())).map_err(|_| {
-            format!(
-                "unknown execution_mode '{}' (iterative, budgeted_plan or set_cover_plan)",
-                result.execution_mode
-            )
-        })?;
-    let budget = Budget::parse(&result.budget)?;
     if result.uid.is_empty() || result.method.is_empty() || result.view_space.is_empty() {
         return Err("empty uid, method or view_space".into());
     }
-    if !result.checkpoints.contains_key(objview_episode::result::TERMINAL_CHECKPOINT) {
+    if !result.checkpoints.contains_key(&CheckpointKey::Terminal) {
         return Err("no `terminal` checkpoint".into());
     }
     let has = |m: &objview_episode::result::Metrics| m.nsc.contains_key(tau) && m.sc.contains_key(tau);
@@ -384,7 +453,7 @@ fn check(result: EpisodeResult, source: Source, tau: &str) -> Result<Episode, St
     if let Some(s) = result.steps.iter().find(|s| !has(&s.metrics)) {
         return Err(format!("step {} has no NSC@{tau} or SC@{tau}", s.step));
     }
-    Ok(Episode { source, mode, budget, result })
+    Ok(Episode { source, result })
 }
 
 /// A method must have one family and one execution mode: the episodes that contradict the first
@@ -398,7 +467,7 @@ fn contradicting_methods<'a>(files: &[InputFile], episodes: &'a [Episode]) -> Ve
             first.insert(&r.method, e);
             continue;
         };
-        let bad = |field: &str, here: &str, there: &str| {
+        let bad = |field: &str, here: &dyn std::fmt::Display, there: &dyn std::fmt::Display| {
             format!(
                 "method '{}' has {field} '{here}' here but '{there}' at {}",
                 r.method,
@@ -407,7 +476,7 @@ fn contradicting_methods<'a>(files: &[InputFile], episodes: &'a [Episode]) -> Ve
         };
         if r.family != f.result.family {
             out.push((e, bad("family", &r.family, &f.result.family)));
-        } else if e.mode != f.mode {
+        } else if r.execution_mode != f.result.execution_mode {
             out.push((e, bad("execution_mode", &r.execution_mode, &f.result.execution_mode)));
         }
     }
@@ -415,7 +484,7 @@ fn contradicting_methods<'a>(files: &[InputFile], episodes: &'a [Episode]) -> Ve
 }
 
 fn terminal_views(e: &Episode) -> usize {
-    e.result.checkpoints.get(objview_episode::result::TERMINAL_CHECKPOINT).map_or(0, |c| c.metrics.views)
+    e.result.checkpoints.get(&CheckpointKey::Terminal).map_or(0, |c| c.metrics.views)
 }
 
 fn duplicate(kind: DuplicateKind, kept: &Episode, dropped: &Episode) -> Duplicate {
@@ -425,7 +494,7 @@ fn duplicate(kind: DuplicateKind, kept: &Episode, dropped: &Episode) -> Duplicat
         uid: r.uid.clone(),
         method: r.method.clone(),
         view_space: r.view_space.clone(),
-        budget: r.budget.clone(),
+        budget: r.budget.to_string(),
         seed: r.seed,
         kept: kept.source,
         dropped: dropped.source,
@@ -439,7 +508,7 @@ fn deduplicate(raw: Vec<Episode>) -> (Vec<Episode>, Vec<Duplicate>) {
     let mut last: BTreeMap<(String, String, String, String, u64), usize> = BTreeMap::new();
     for (i, e) in raw.iter().enumerate() {
         let r = &e.result;
-        let key = (r.uid.clone(), r.method.clone(), r.view_space.clone(), r.budget.clone(), r.seed);
+        let key = (r.uid.clone(), r.method.clone(), r.view_space.clone(), r.budget.to_string(), r.seed);
         if let Some(prev) = last.insert(key, i) {
             duplicates.push(duplicate(DuplicateKind::SameKey, e, &raw[prev]));
         }
@@ -450,7 +519,7 @@ fn deduplicate(raw: Vec<Episode>) -> (Vec<Episode>, Vec<Duplicate>) {
     let mut dropped = BTreeSet::new();
     for &i in &kept {
         let e = &raw[i];
-        if e.mode != ExecutionMode::Iterative {
+        if e.result.execution_mode != ExecutionMode::Iterative {
             continue;
         }
         let r = &e.result;

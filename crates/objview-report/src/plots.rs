@@ -113,7 +113,7 @@ pub fn nsc_curves(episodes: &[Episode], tau: &str) -> Vec<Curve> {
     let mut groups: BTreeMap<(String, String, Option<String>), Vec<&Episode>> = BTreeMap::new();
     for e in episodes {
         let r = &e.result;
-        let budget = (e.mode != ExecutionMode::Iterative).then(|| r.budget.clone());
+        let budget = (r.execution_mode != ExecutionMode::Iterative).then(|| r.budget.to_string());
         groups.entry((r.view_space.clone(), r.method.clone(), budget)).or_default().push(e);
     }
     let mut curves = Vec::new();

@@ -27,7 +27,7 @@ fn ranked_rows(t: &RankedTable) -> Vec<Vec<String>> {
                 r.setting.label(),
                 r.rank.map_or_else(|| "ref".into(), |k| k.to_string()),
                 r.method.clone(),
-                family_title(&r.family),
+                family_title(r.family.as_str()),
                 fixed(r.views, 1),
                 fixed(r.nsc, 3),
                 fixed(r.path_cost, 2),
@@ -142,7 +142,7 @@ pub fn ranked_csv(t: &RankedTable, tau: &str) -> String {
                 r.setting.label(),
                 r.rank.map_or_else(|| "ref".into(), |k| k.to_string()),
                 r.method.clone(),
-                r.family.clone(),
+                r.family.to_string(),
                 r.n.to_string(),
                 csv_num(Some(r.views)),
                 csv_num(Some(r.nsc)),
@@ -193,7 +193,7 @@ pub fn reach_markdown(t: &ReachTable, tau: &str) -> String {
             .map(|r| {
                 vec![
                     r.method.clone(),
-                    family_title(&r.family),
+                    family_title(r.family.as_str()),
                     r.setting.label(),
                     if r.paired {
                         r.common_objects.to_string()
@@ -265,7 +265,7 @@ pub fn reach_csv(t: &ReachTable, tau: &str) -> String {
         .map(|r| {
             vec![
                 r.method.clone(),
-                r.family.clone(),
+                r.family.to_string(),
                 r.setting.label(),
                 t.space_a.clone(),
                 t.space_b.clone(),
@@ -486,7 +486,7 @@ pub fn terminal_markdown(t: &TerminalTable) -> String {
             let mut row = vec![
                 or_unknown(&r.view_space),
                 or_unknown(&r.method),
-                family_title(&r.family),
+                family_title(r.family.as_str()),
                 r.episodes.to_string(),
             ];
             row.extend(t.reasons.iter().map(|k| r.reasons.get(k).copied().unwrap_or(0).to_string()));
@@ -515,7 +515,7 @@ pub fn terminal_csv(t: &TerminalTable) -> String {
         .iter()
         .map(|r| {
             let mut row =
-                vec![r.view_space.clone(), r.method.clone(), r.family.clone(), r.episodes.to_string()];
+                vec![r.view_space.clone(), r.method.clone(), r.family.to_string(), r.episodes.to_string()];
             row.extend(t.reasons.iter().map(|k| r.reasons.get(k).copied().unwrap_or(0).to_string()));
             row.push(r.failures.to_string());
             row
@@ -648,8 +648,8 @@ pub fn summary_csv(aggregates: &[Aggregate], tau: &str, taus: &[String]) -> Stri
                 a.setting.label(),
                 a.view_space.clone(),
                 a.method.clone(),
-                a.family.clone(),
-                objview_episode::engine::mode_name(a.execution_mode).to_string(),
+                a.family.to_string(),
+                a.execution_mode.to_string(),
                 a.n.to_string(),
                 a.objects.to_string(),
                 a.from_step.to_string(),

@@ -19,6 +19,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use objview_dataset::{read_annotations, Annotation};
+use objview_episode::CheckpointKey;
 use serde::Serialize;
 use serde_json::{json, Value};
 
@@ -82,7 +83,7 @@ pub struct ReportSettings {
     /// The B side of Table 4 (`quarter`).
     pub space_b: String,
     /// The checkpoint of iterative planners' automatic setting and of Table 5's MS columns.
-    pub auto_checkpoint: String,
+    pub auto_checkpoint: CheckpointKey,
     /// Draw the figures.
     pub plots: bool,
     /// Failure lines listed in the Markdown (all are in `failures.csv`).
@@ -97,7 +98,7 @@ impl Default for ReportSettings {
             top: 3,
             space_a: "whole".into(),
             space_b: "quarter".into(),
-            auto_checkpoint: "MS@0.02".into(),
+            auto_checkpoint: CheckpointKey::Stabilized(0.02),
             plots: true,
             failures_listed: 20,
         }
@@ -122,9 +123,6 @@ impl ReportSettings {
         }
         if self.space_a == self.space_b {
             return bad("space_b", "must differ from space_a");
-        }
-        if self.auto_checkpoint.is_empty() {
-            return bad("auto_checkpoint", "must name a checkpoint such as MS@0.02");
         }
         Ok(())
     }
@@ -256,7 +254,9 @@ pub fn build_report(
     for e in episodes {
         if budget_settings.iter().all(|&s| pick(e, s, &settings.auto_checkpoint).is_none()) {
             let r = &e.result;
-            *unused.entry((r.method.clone(), r.execution_mode.clone(), r.budget.clone())).or_default() += 1;
+            *unused
+                .entry((r.method.clone(), r.execution_mode.to_string(), r.budget.to_string()))
+                .or_default() += 1;
         }
     }
     let count_dup = |k: DuplicateKind| loaded.duplicates.iter().filter(|d| d.kind == k).count();

@@ -14,13 +14,10 @@
 use std::fmt;
 
 use objview_episode::result::{EpisodeResult, Metrics};
-use objview_episode::{Budget, ExecutionMode};
+use objview_episode::{Budget, CheckpointKey, ExecutionMode};
 use serde::{Serialize, Serializer};
 
 use crate::load::Episode;
-
-/// Name of the checkpoint every episode has (defined with the result format).
-pub use objview_episode::result::TERMINAL_CHECKPOINT as TERMINAL;
 
 /// The budget settings always reported (paper §5.2).
 pub const DEFAULT_SETTINGS: [Setting; 3] = [Setting::Fixed(5), Setting::Fixed(30), Setting::Automatic];
@@ -35,10 +32,10 @@ pub enum Setting {
 }
 
 impl Setting {
-    /// `K=5`, `Automatic`.
+    /// `K=5` (the name of its checkpoint), `Automatic`.
     pub fn label(self) -> String {
         match self {
-            Setting::Fixed(k) => format!("K={k}"),
+            Setting::Fixed(k) => CheckpointKey::Budget(k).to_string(),
             Setting::Automatic => "Automatic".into(),
         }
     }
@@ -46,7 +43,7 @@ impl Setting {
     /// A short label for plot annotations: `K=5`, `Auto`.
     pub fn short(self) -> String {
         match self {
-            Setting::Fixed(k) => format!("K={k}"),
+            Setting::Fixed(k) => CheckpointKey::Budget(k).to_string(),
             Setting::Automatic => "Auto".into(),
         }
     }
@@ -69,7 +66,9 @@ impl Serialize for Setting {
 pub fn settings_of(episodes: &[Episode]) -> Vec<Setting> {
     let mut out: Vec<Setting> = DEFAULT_SETTINGS.to_vec();
     for e in episodes {
-        if let (Budget::Fixed(k), false) = (e.budget, e.mode == ExecutionMode::Iterative) {
+        if let (Budget::Fixed(k), false) =
+            (e.result.budget, e.result.execution_mode == ExecutionMode::Iterative)
+        {
             out.push(Setting::Fixed(k));
         }
     }
@@ -102,17 +101,17 @@ pub struct Pick<'a> {
 }
 
 fn terminal(r: &EpisodeResult) -> Option<&Metrics> {
-    r.checkpoints.get(TERMINAL).map(|c| &c.metrics)
+    r.checkpoints.get(&CheckpointKey::Terminal).map(|c| &c.metrics)
 }
 
 /// What `episode` contributes to `setting` (module docs); `None` when it does not take part.
 /// `auto_checkpoint` is the MS checkpoint of the automatic setting (`MS@0.02`).
-pub fn pick<'a>(episode: &'a Episode, setting: Setting, auto_checkpoint: &str) -> Option<Pick<'a>> {
+pub fn pick<'a>(episode: &'a Episode, setting: Setting, auto_checkpoint: &CheckpointKey) -> Option<Pick<'a>> {
     let r = &episode.result;
     let found = |metrics, source| Some(Pick { episode, metrics, source });
-    match (episode.mode, setting) {
+    match (r.execution_mode, setting) {
         (ExecutionMode::Iterative, Setting::Fixed(k)) => {
-            if let Some(c) = r.checkpoints.get(&setting.label()) {
+            if let Some(c) = r.checkpoints.get(&CheckpointKey::Budget(k)) {
                 return found(&c.metrics, PickSource::Checkpoint);
             }
             if let Some(s) = r.steps.iter().find(|s| s.step == k) {
@@ -126,11 +125,11 @@ pub fn pick<'a>(episode: &'a Episode, setting: Setting, auto_checkpoint: &str) -
         },
         (ExecutionMode::BudgetedPlan, Setting::Fixed(k))
         | (ExecutionMode::SetCoverPlan, Setting::Fixed(k))
-            if episode.budget == Budget::Fixed(k) =>
+            if r.budget == Budget::Fixed(k) =>
         {
             found(terminal(r)?, PickSource::Checkpoint)
         }
-        (ExecutionMode::SetCoverPlan, Setting::Automatic) if episode.budget == Budget::Auto => {
+        (ExecutionMode::SetCoverPlan, Setting::Automatic) if r.budget == Budget::Auto => {
             found(terminal(r)?, PickSource::Checkpoint)
         }
         _ => None,
@@ -142,27 +141,29 @@ mod tests {
     use super::*;
     use crate::testutil::{close, episode, Spec};
 
+    const MS: CheckpointKey = CheckpointKey::Stabilized(0.02);
+
     #[test]
     fn iterative_runs_serve_every_setting() {
         // 21 views: K=5 and K=10 checkpoints, no K=30; MS@0.02 at step 12.
         let spec = Spec { last: 20, ms: Some(12), ..Spec::new("o1", "rse") };
         let e = episode(&spec);
-        let p = pick(&e, Setting::Fixed(5), "MS@0.02").unwrap();
+        let p = pick(&e, Setting::Fixed(5), &MS).unwrap();
         assert_eq!((p.metrics.views, p.source), (6, PickSource::Checkpoint));
         // Ended before 30 planner views: terminal.
-        let p = pick(&e, Setting::Fixed(30), "MS@0.02").unwrap();
+        let p = pick(&e, Setting::Fixed(30), &MS).unwrap();
         assert_eq!((p.metrics.views, p.source), (21, PickSource::TerminalFallback));
         close(p.metrics.nsc["0.02"], spec.nsc(20));
         // K=20 is not checkpointed by the runner but the run went past it: step 20.
-        let p = pick(&e, Setting::Fixed(20), "MS@0.02").unwrap();
+        let p = pick(&e, Setting::Fixed(20), &MS).unwrap();
         assert_eq!((p.metrics.views, p.source), (21, PickSource::Step));
-        let p = pick(&e, Setting::Fixed(15), "MS@0.02").unwrap();
+        let p = pick(&e, Setting::Fixed(15), &MS).unwrap();
         assert_eq!((p.metrics.views, p.source), (16, PickSource::Step));
         // Automatic: MS@0.02, else terminal.
-        let p = pick(&e, Setting::Automatic, "MS@0.02").unwrap();
+        let p = pick(&e, Setting::Automatic, &MS).unwrap();
         assert_eq!((p.metrics.views, p.source), (13, PickSource::Checkpoint));
         let e = episode(&Spec { ms: None, ..spec });
-        let p = pick(&e, Setting::Automatic, "MS@0.02").unwrap();
+        let p = pick(&e, Setting::Automatic, &MS).unwrap();
         assert_eq!((p.metrics.views, p.source), (21, PickSource::TerminalFallback));
     }
 
@@ -170,16 +171,16 @@ mod tests {
     fn finite_plans_use_budget_matched_runs_at_terminal() {
         let b5 = Spec { mode: "budgeted_plan", budget: "5", last: 5, ..Spec::new("o1", "mcp") };
         let e = episode(&b5);
-        assert_eq!(pick(&e, Setting::Fixed(5), "MS@0.02").unwrap().metrics.views, 6);
-        assert!(pick(&e, Setting::Fixed(30), "MS@0.02").is_none());
-        assert!(pick(&e, Setting::Automatic, "MS@0.02").is_none());
+        assert_eq!(pick(&e, Setting::Fixed(5), &MS).unwrap().metrics.views, 6);
+        assert!(pick(&e, Setting::Fixed(30), &MS).is_none());
+        assert!(pick(&e, Setting::Automatic, &MS).is_none());
         let auto = Spec { mode: "set_cover_plan", budget: "auto", last: 7, ..Spec::new("o1", "scp") };
         let e = episode(&auto);
-        let p = pick(&e, Setting::Automatic, "MS@0.02").unwrap();
+        let p = pick(&e, Setting::Automatic, &MS).unwrap();
         assert_eq!((p.metrics.views, p.source), (8, PickSource::Checkpoint));
-        assert!(pick(&e, Setting::Fixed(5), "MS@0.02").is_none());
+        assert!(pick(&e, Setting::Fixed(5), &MS).is_none());
         let k5 = Spec { mode: "set_cover_plan", budget: "5", last: 5, ..Spec::new("o1", "scp") };
-        assert_eq!(pick(&episode(&k5), Setting::Fixed(5), "MS@0.02").unwrap().metrics.views, 6);
+        assert_eq!(pick(&episode(&k5), Setting::Fixed(5), &MS).unwrap().metrics.views, 6);
     }
 
     #[test]

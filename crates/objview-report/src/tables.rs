@@ -21,15 +21,13 @@ use std::cmp::Ordering;
 use std::collections::{BTreeMap, BTreeSet};
 
 use objview_dataset::Annotation;
+use objview_episode::{CheckpointKey, Family};
 use serde::Serialize;
 
 use crate::aggregate::{nsc, sc, Aggregate, GroupKey, Stat};
 use crate::format::{family_rank, time_bin};
 use crate::load::{Episode, FailureLine};
-use crate::select::{Pick, Setting, TERMINAL};
-
-/// The family whose runs read the ground truth: never ranked, shown as a reference.
-pub const ORACLE: &str = "oracle";
+use crate::select::{Pick, Setting};
 
 /// A row of Table 2 or 3.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -40,8 +38,8 @@ pub struct RankedRow {
     pub rank: Option<usize>,
     /// Method name.
     pub method: String,
-    /// snake_case family (`classical`, …).
-    pub family: String,
+    /// The family (`classical`, …).
+    pub family: Family,
     /// Episodes.
     pub n: usize,
     /// Mean #Views.
@@ -83,7 +81,7 @@ fn ranked_row(a: &Aggregate, rank: Option<usize>) -> RankedRow {
         setting: a.setting,
         rank,
         method: a.method.clone(),
-        family: a.family.clone(),
+        family: a.family,
         n: a.n,
         views: a.views.mean,
         nsc: a.nsc.mean,
@@ -127,12 +125,14 @@ fn ranked(
         if here.is_empty() {
             continue;
         }
-        let ranked_ones: Vec<&Aggregate> = here.iter().copied().filter(|a| a.family != ORACLE).collect();
+        // The oracle family reads the ground truth: never ranked, shown as a reference.
+        let ranked_ones: Vec<&Aggregate> =
+            here.iter().copied().filter(|a| a.family != Family::Oracle).collect();
         let mut passing: Vec<&Aggregate> = ranked_ones.iter().copied().filter(|a| keep(a)).collect();
         passing.sort_by(order);
         counts.push(SettingCount { setting, methods: ranked_ones.len(), qualifying: passing.len() });
         rows.extend(passing.iter().take(top).enumerate().map(|(i, a)| ranked_row(a, Some(i + 1))));
-        rows.extend(here.iter().filter(|a| a.family == ORACLE).map(|a| ranked_row(a, None)));
+        rows.extend(here.iter().filter(|a| a.family == Family::Oracle).map(|a| ranked_row(a, None)));
     }
     RankedTable { view_space: view_space.to_string(), rows, counts }
 }
@@ -163,8 +163,8 @@ pub fn path_top(
 pub struct ReachRow {
     /// Method name.
     pub method: String,
-    /// snake_case family.
-    pub family: String,
+    /// The family.
+    pub family: Family,
     /// The maximum-view setting.
     pub setting: Setting,
     /// Whether both sides were restricted to the common objects.
@@ -194,9 +194,11 @@ pub struct ReachTable {
     pub space_b: String,
     /// Rows in family order, then by method.
     pub rows: Vec<ReachRow>,
-    /// Methods with episodes in only one of the two spaces, or no setting in common.
+    /// Methods with episodes in space A only.
     pub only_a: Vec<String>,
+    /// Methods with episodes in space B only.
     pub only_b: Vec<String>,
+    /// Methods in both spaces without a setting in common.
     pub no_common_setting: Vec<String>,
 }
 
@@ -266,7 +268,7 @@ pub fn reachability(
         let (nb, views_b, nsc_b, sc_b) = view_quality(&kept(pb, paired, &common), tau);
         table.rows.push(ReachRow {
             method: method.to_string(),
-            family: best.family.clone(),
+            family: best.family,
             setting: best.setting,
             paired,
             common_objects: common.len(),
@@ -279,9 +281,9 @@ pub fn reachability(
         });
     }
     table.rows.sort_by(|x, y| {
-        family_rank(&x.family)
-            .cmp(&family_rank(&y.family))
-            .then(x.family.cmp(&y.family))
+        family_rank(x.family.as_str())
+            .cmp(&family_rank(y.family.as_str()))
+            .then(x.family.as_str().cmp(y.family.as_str()))
             .then(x.method.cmp(&y.method))
     });
     table
@@ -327,7 +329,7 @@ pub struct MsTable {
     /// View space of the oracle runs.
     pub view_space: String,
     /// The MS checkpoint (`MS@0.02`).
-    pub checkpoint: String,
+    pub checkpoint: CheckpointKey,
     /// Rows by method, then pool (Main first).
     pub rows: Vec<MsRow>,
     /// Oracle runs in the view space, annotated or not.
@@ -344,15 +346,17 @@ pub fn map_stabilization(
     episodes: &[Episode],
     annotations: &[Annotation],
     view_space: &str,
-    checkpoint: &str,
+    checkpoint: &CheckpointKey,
     tau: &str,
 ) -> MsTable {
     let by_uid: BTreeMap<&str, &Annotation> = annotations.iter().map(|a| (a.uid.as_str(), a)).collect();
-    let oracle: Vec<&Episode> =
-        episodes.iter().filter(|e| e.result.family == ORACLE && e.result.view_space == view_space).collect();
+    let oracle: Vec<&Episode> = episodes
+        .iter()
+        .filter(|e| e.result.family == Family::Oracle && e.result.view_space == view_space)
+        .collect();
     let mut table = MsTable {
         view_space: view_space.to_string(),
-        checkpoint: checkpoint.to_string(),
+        checkpoint: *checkpoint,
         rows: Vec::new(),
         oracle_runs: oracle.len(),
         unannotated: Vec::new(),
@@ -380,7 +384,7 @@ pub fn map_stabilization(
         let mut tammes_views = Vec::new();
         for (e, _) in &runs {
             let cps = &e.result.checkpoints;
-            let Some(end) = cps.get(TERMINAL) else { continue };
+            let Some(end) = cps.get(&CheckpointKey::Terminal) else { continue };
             let at_ms = match cps.get(checkpoint) {
                 Some(c) => c,
                 None => {
@@ -472,7 +476,7 @@ pub fn terminal_summary(episodes: &[Episode], failures: &[FailureLine]) -> Termi
     }
     for e in episodes {
         let r = row(&mut rows, &e.result.view_space, &e.result.method);
-        r.family = e.result.family.clone();
+        r.family = e.result.family.to_string();
         r.episodes += 1;
         *r.reasons.entry(e.result.terminal_reason.clone()).or_default() += 1;
     }
@@ -503,12 +507,19 @@ mod tests {
         Stat { mean, std: None }
     }
 
-    fn agg(setting: Setting, method: &str, family: &str, views: f64, nsc: f64, path_cost: f64) -> Aggregate {
+    fn agg(
+        setting: Setting,
+        method: &str,
+        family: Family,
+        views: f64,
+        nsc: f64,
+        path_cost: f64,
+    ) -> Aggregate {
         Aggregate {
             setting,
             view_space: "whole".into(),
             method: method.into(),
-            family: family.into(),
+            family,
             execution_mode: ExecutionMode::Iterative,
             n: 1,
             objects: 1,
@@ -529,11 +540,11 @@ mod tests {
     fn rankings_break_ties_by_path_cost_then_name_and_skip_the_oracle() {
         let k5 = Setting::Fixed(5);
         let aggs = vec![
-            agg(k5, "b", "learned", 6.0, 0.9, 10.0),
-            agg(k5, "a", "learned", 6.0, 0.9, 10.0),
-            agg(k5, "c", "hybrid", 6.0, 0.9, 8.0),
-            agg(k5, "d", "classical", 6.0, 0.95, 30.0),
-            agg(k5, "z", ORACLE, 6.0, 0.99, 5.0),
+            agg(k5, "b", Family::Learned, 6.0, 0.9, 10.0),
+            agg(k5, "a", Family::Learned, 6.0, 0.9, 10.0),
+            agg(k5, "c", Family::Hybrid, 6.0, 0.9, 8.0),
+            agg(k5, "d", Family::Classical, 6.0, 0.95, 30.0),
+            agg(k5, "z", Family::Oracle, 6.0, 0.99, 5.0),
         ];
         let t = quality_top(&aggs, "whole", &[k5], 3);
         let got: Vec<(Option<usize>, &str)> = t.rows.iter().map(|r| (r.rank, r.method.as_str())).collect();

@@ -546,7 +546,7 @@ fn bad_lines_are_skipped_and_listed_with_their_line_and_reason() {
     let e = skipped_one(std::slice::from_ref(&ok), &ReportSettings { tau: "0.05".into(), ..d.clone() });
     assert!(e.starts_with("1: checkpoint `K=10` has no NSC@0.05"), "{e}");
     let mut no_terminal = Spec::new("o1", "alpha").build();
-    no_terminal.checkpoints.remove("terminal");
+    no_terminal.checkpoints.remove(&objview_episode::CheckpointKey::Terminal);
     let e = skipped_one(&[serde_json::to_string(&no_terminal).unwrap()], &d);
     assert!(e.starts_with("1: no `terminal` checkpoint"), "{e}");
     // A later line that contradicts its method's family is the one skipped.
@@ -569,6 +569,93 @@ fn bad_lines_are_skipped_and_listed_with_their_line_and_reason() {
     assert!(e.to_string().contains("invalid setting top"), "{e}");
     let e = build_report(&[PathBuf::from("/no/such/file.jsonl")], &[], &d).unwrap_err().to_string();
     assert!(e.contains("/no/such/file.jsonl"), "{e}");
+}
+
+#[test]
+fn names_the_result_format_does_not_know_are_skipped_with_a_reason_after_other_faults() {
+    let d = ReportSettings::default();
+    let e = skipped_one(&[Spec { family: "planner", ..Spec::new("o1", "alpha") }.line()], &d);
+    assert_eq!(e, "1: unknown family 'planner' (classical, learned, hybrid, oracle or baseline)");
+    let mut v: serde_json::Value = serde_json::from_str(&Spec::new("o1", "alpha").line()).unwrap();
+    v["checkpoints"]["K=05"] = v["checkpoints"]["K=5"].clone();
+    let e = skipped_one(&[v.to_string()], &d);
+    assert_eq!(e, "1: unknown checkpoint name 'K=05' (K=k, MS@δ such as MS@0.02, or terminal)");
+    // An unknown execution mode is reported before a bad budget or family, as before.
+    let both = Spec { mode: "greedy", budget: "many", family: "planner", ..Spec::new("o1", "alpha") };
+    assert!(skipped_one(&[both.line()], &d).starts_with("1: unknown execution_mode 'greedy'"));
+    let both = Spec { budget: "many", family: "planner", ..Spec::new("o1", "alpha") };
+    assert!(skipped_one(&[both.line()], &d).starts_with("1: budget must be"));
+    // A line that is not an episode result for another reason says so first, as it did when the
+    // names were plain strings.
+    let mut v: serde_json::Value = serde_json::from_str(&both.line()).unwrap();
+    v.as_object_mut().unwrap().remove("uid");
+    assert_eq!(skipped_one(&[v.to_string()], &d), "1: not an episode result (missing field `uid`)");
+    v["execution_mode"] = json!(3);
+    assert_eq!(
+        skipped_one(&[v.to_string()], &d),
+        "1: not an episode result (invalid type: integer `3`, expected a string)"
+    );
+}
+
+/// The JSON object keys of `text`, in the order they are written.
+fn keys_in_order(text: &str) -> Vec<String> {
+    let mut keys = Vec::new();
+    let mut chars = text.chars().peekable();
+    while let Some(c) = chars.next() {
+        if c != '"' {
+            continue;
+        }
+        let mut s = String::new();
+        while let Some(c) = chars.next() {
+            match c {
+                '\\' => s.extend(chars.next()),
+                '"' => break,
+                c => s.push(c),
+            }
+        }
+        if chars.peek() == Some(&':') {
+            keys.push(s);
+        }
+    }
+    keys
+}
+
+#[test]
+fn result_lines_written_before_the_names_were_typed_read_and_write_back_the_same_json() {
+    use objview_episode::result::EpisodeResult;
+    use objview_episode::{Budget, CheckpointKey, ExecutionMode, Family};
+    // Two lines of `objview run --no-timings` by the binary before the change
+    // (scripts/golden.sh: random-tsp K = 5 in quarter, random auto in whole).
+    let text = include_str!("../testdata/before-typed-names.jsonl");
+    let lines: Vec<String> = text.lines().map(str::to_string).collect();
+    for line in &lines {
+        let r: EpisodeResult = serde_json::from_str(line).unwrap();
+        let back = serde_json::to_string(&r).unwrap();
+        assert_eq!(
+            serde_json::to_value(&r).unwrap(),
+            serde_json::from_str::<serde_json::Value>(line).unwrap()
+        );
+        assert_eq!(keys_in_order(&back), keys_in_order(line), "fields and checkpoint keys in the same order");
+    }
+    let r: EpisodeResult = serde_json::from_str(&lines[0]).unwrap();
+    assert_eq!(
+        (r.family, r.execution_mode, r.budget),
+        (Family::Classical, ExecutionMode::BudgetedPlan, Budget::Fixed(5))
+    );
+    let names: Vec<String> = r.checkpoints.keys().map(|k| k.to_string()).collect();
+    assert_eq!(names, ["K=5", "MS@0.01", "MS@0.02", "MS@0.03", "terminal"]);
+    let r: EpisodeResult = serde_json::from_str(&lines[1]).unwrap();
+    assert_eq!(
+        (r.family, r.execution_mode, r.budget),
+        (Family::Baseline, ExecutionMode::Iterative, Budget::Auto)
+    );
+    assert_eq!(r.checkpoints.keys().next(), Some(&CheckpointKey::Budget(10)), "K=10 sorts before K=5");
+    assert!(r.checkpoints.contains_key(&CheckpointKey::Stabilized(0.02)));
+    // And the report reads them as results.
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_lines(dir.path(), "before.jsonl", &lines);
+    let report = build_report(&[path], &[], &ReportSettings::default()).unwrap();
+    assert_eq!((report.counts.episodes, report.counts.skipped_lines), (2, 0));
 }
 
 #[test]

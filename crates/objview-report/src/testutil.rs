@@ -5,7 +5,8 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use objview_episode::result::{Checkpoint, EpisodeResult, Metrics, ReferenceInfo, Step, TerminalSource};
+use objview_episode::result::{Checkpoint, EpisodeResult, Metrics, ReferenceInfo, Step};
+use objview_episode::{Budget, CheckpointKey, ExecutionMode, Family, TerminalSource};
 use serde_json::{json, Value};
 
 /// One synthetic episode.
@@ -70,6 +71,7 @@ impl Spec {
         }
     }
 
+    /// The episode result (family, mode and budget must be valid names).
     pub fn build(&self) -> EpisodeResult {
         let pose = [3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
         let steps: Vec<Step> = (0..=self.last)
@@ -89,22 +91,22 @@ impl Spec {
         if self.mode == "iterative" {
             for k in [5, 10, 30, 50] {
                 if k <= self.last {
-                    checkpoints.insert(format!("K={k}"), cp(k));
+                    checkpoints.insert(CheckpointKey::Budget(k), cp(k));
                 }
             }
         }
         if let Some(m) = self.ms {
-            checkpoints.insert("MS@0.02".to_string(), cp(m));
+            checkpoints.insert(CheckpointKey::Stabilized(0.02), cp(m));
         }
-        checkpoints.insert("terminal".to_string(), cp(self.last));
+        checkpoints.insert(CheckpointKey::Terminal, cp(self.last));
         EpisodeResult {
             settings: json!({"test": true}),
             uid: self.uid.into(),
             method: self.method.into(),
-            family: self.family.into(),
-            execution_mode: self.mode.into(),
+            family: self.family.parse().unwrap(),
+            execution_mode: self.mode.parse().unwrap(),
             view_space: self.space.into(),
-            budget: self.budget.into(),
+            budget: self.budget.parse().unwrap(),
             seed: self.seed,
             start_pose: pose,
             visited_poses: vec![pose; self.last + 1],
@@ -127,9 +129,22 @@ impl Spec {
         }
     }
 
-    /// The episode as one JSON line (no newline).
+    /// The episode as one JSON line (no newline); family, mode and budget are written as given,
+    /// valid or not.
     pub fn line(&self) -> String {
-        serde_json::to_string(&self.build()).unwrap()
+        // Stand-ins for invalid names, replaced by the given strings afterwards.
+        let or = |s: &'static str, ok: bool, stand_in: &'static str| if ok { s } else { stand_in };
+        let valid = Spec {
+            family: or(self.family, self.family.parse::<Family>().is_ok(), "classical"),
+            mode: or(self.mode, self.mode.parse::<ExecutionMode>().is_ok(), "iterative"),
+            budget: or(self.budget, self.budget.parse::<Budget>().is_ok(), "auto"),
+            ..self.clone()
+        };
+        let mut v = serde_json::to_value(valid.build()).unwrap();
+        v["family"] = json!(self.family);
+        v["execution_mode"] = json!(self.mode);
+        v["budget"] = json!(self.budget);
+        serde_json::to_string(&v).unwrap()
     }
 }
 
@@ -173,10 +188,5 @@ pub fn close(a: f64, b: f64) {
 
 /// The checked [`crate::load::Episode`] of a spec (line 1 of file 0).
 pub fn episode(spec: &Spec) -> crate::load::Episode {
-    crate::load::Episode {
-        source: crate::load::Source { file: 0, line: 1 },
-        mode: serde_json::from_value(json!(spec.mode)).unwrap(),
-        budget: objview_episode::Budget::parse(spec.budget).unwrap(),
-        result: spec.build(),
-    }
+    crate::load::Episode { source: crate::load::Source { file: 0, line: 1 }, result: spec.build() }
 }

@@ -20,14 +20,9 @@ use serde_json::{json, Value};
 
 use crate::auth::Caller;
 use crate::error::ApiError;
-use crate::pool::{CANDIDATE_SETS, VIEW_SPACES};
-use crate::state::{AppState, CreateSpec, Slot, MAX_FEASIBLE_POSES};
-
-/// The request body limit (1 MiB).
-pub const BODY_LIMIT: usize = 1 << 20;
-
-/// The header that carries the step of a depth or RGB observation.
-pub const STEP_HEADER: &str = "x-objview-step";
+use crate::protocol::{BODY_LIMIT, CANDIDATE_SETS, MAX_FEASIBLE_POSES, STEP_HEADER, VIEW_SPACES};
+use crate::request::CreateSpec;
+use crate::state::{AppState, Slot};
 
 /// The router of the whole API over `state`.
 pub fn router(state: Arc<AppState>) -> Router {

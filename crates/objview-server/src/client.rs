@@ -208,7 +208,7 @@ impl Client {
     /// Feasibility of each pose (several requests when there are more than 4096).
     pub fn feasible(&self, id: &str, poses: &[Pose]) -> Result<Vec<bool>, ClientError> {
         let mut out = Vec::with_capacity(poses.len());
-        for chunk in poses.chunks(crate::state::MAX_FEASIBLE_POSES) {
+        for chunk in poses.chunks(crate::protocol::MAX_FEASIBLE_POSES) {
             let list: Vec<[f64; 7]> = chunk.iter().map(|p| p.to_array()).collect();
             let v = self.post_json(&format!("/v1/episodes/{id}/feasible"), &json!({ "poses": list }))?;
             let mask = v["feasible"].as_array().ok_or_else(|| protocol("no feasible"))?;
@@ -258,13 +258,19 @@ impl Client {
 /// One remote episode to play.
 #[derive(Debug, Clone)]
 pub struct RemoteEpisode {
+    /// The split id.
     pub split: String,
     /// A uid (or an index) of the split.
     pub object: String,
+    /// The view space.
     pub view_space: String,
+    /// The budget protocol.
     pub budget: Budget,
+    /// The candidate set.
     pub candidate_set: String,
+    /// The user seed.
     pub seed: u64,
+    /// Whether the result records wall-clock times.
     pub record_timings: bool,
 }
 
@@ -332,23 +338,16 @@ fn panic_text(p: &Box<dyn std::any::Any + Send>) -> String {
         .unwrap_or_else(|| "panic".into())
 }
 
-fn family_name(planner: &dyn Planner) -> String {
-    serde_json::to_value(planner.family())
-        .ok()
-        .and_then(|v| v.as_str().map(str::to_string))
-        .unwrap_or_default()
-}
-
 /// The create request of `ep` for `planner`.
 pub fn create_request(planner: &dyn Planner, ep: &RemoteEpisode) -> Value {
     json!({
         "split": ep.split,
         "object": ep.object,
         "view_space": ep.view_space,
-        "budget": ep.budget.label(),
+        "budget": ep.budget.to_string(),
         "method": planner.name(),
-        "family": family_name(planner),
-        "execution_mode": objview_episode::engine::mode_name(planner.execution_mode()),
+        "family": planner.family().to_string(),
+        "execution_mode": planner.execution_mode().to_string(),
         "candidate_set": ep.candidate_set,
         "seed": ep.seed,
         "params": planner.params(),

@@ -2,6 +2,8 @@
 //! on objects they never see. docs/server-api.md is the contract.
 //!
 //! - [`api`] — the routes; [`openapi`] — `GET /openapi.json`.
+//! - [`protocol`] — the protocol's names and limits (view spaces, candidate sets, families,
+//!   request sizes); [`request`] — the create request, parsed and validated ([`request::CreateSpec`]).
 //! - [`state`] — episodes in memory (one lock each), time limits, replay after a restart.
 //! - [`db`] — persistence (SQLite, WAL) and `objview export`.
 //! - [`pool`] — split files and the cache of prepared scenes.
@@ -24,6 +26,8 @@ pub mod error;
 pub mod load;
 pub mod openapi;
 pub mod pool;
+pub mod protocol;
+pub mod request;
 pub mod spec;
 pub mod state;
 

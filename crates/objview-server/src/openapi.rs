@@ -1,6 +1,7 @@
 //! `GET /openapi.json`: the OpenAPI 3.0 description of every route, written by hand to agree
 //! with docs/server-api.md (a test checks that every route of the router is described).
 
+use objview_episode::{ExecutionMode, Family, StopReason};
 use serde_json::{json, Value};
 
 fn err_ref() -> Value {
@@ -74,16 +75,16 @@ pub fn document() -> Value {
                         "type": {"type": "string", "enum": ["move"]}, "pose": pose}},
                     {"type": "object", "required": ["type", "reason"], "properties": {
                         "type": {"type": "string", "enum": ["stop"]},
-                        "reason": {"type": "string", "enum": ["plan_end", "candidate_exhausted", "next_view_visited", "next_view_infeasible"]}}}]},
+                        "reason": {"type": "string", "enum": StopReason::ALL}}}]},
                 "CreateEpisode": {"type": "object", "required": ["split", "object", "view_space", "budget", "method"], "properties": {
                     "split": {"type": "string"},
                     "object": {"oneOf": [{"type": "integer", "minimum": 0}, {"type": "string"}]},
-                    "view_space": {"type": "string", "enum": crate::pool::VIEW_SPACES},
+                    "view_space": {"type": "string", "enum": crate::protocol::VIEW_SPACES},
                     "budget": {"oneOf": [{"type": "string"}, {"type": "integer", "minimum": 1}], "description": "\"auto\" or K"},
                     "method": {"type": "string", "pattern": "^[A-Za-z0-9._+-]{1,100}$"},
-                    "family": {"type": "string", "enum": crate::state::FAMILIES, "default": "classical"},
-                    "execution_mode": {"type": "string", "enum": ["iterative", "budgeted_plan", "set_cover_plan"], "default": "iterative"},
-                    "candidate_set": {"type": "string", "enum": crate::pool::CANDIDATE_SETS, "default": "tammes-360"},
+                    "family": {"type": "string", "enum": crate::protocol::FAMILIES, "default": Family::Classical},
+                    "execution_mode": {"type": "string", "enum": ExecutionMode::ALL, "default": ExecutionMode::Iterative},
+                    "candidate_set": {"type": "string", "enum": crate::protocol::CANDIDATE_SETS, "default": "tammes-360"},
                     "seed": {"type": "integer", "minimum": 0, "default": 0},
                     "params": {"default": {}},
                     "record_timings": {"type": "boolean", "default": true}}},

@@ -14,12 +14,6 @@ use objview_views::ViewSpace;
 
 use crate::error::ServerError;
 
-/// The view spaces a server offers (SPEC §5).
-pub const VIEW_SPACES: [&str; 4] = ["whole", "hemi", "quarter", "eighth"];
-
-/// The candidate sets a server hands out.
-pub const CANDIDATE_SETS: [&str; 2] = ["tammes-128", "tammes-360"];
-
 /// One split: its objects in file order.
 #[derive(Debug, Clone)]
 pub struct Split {

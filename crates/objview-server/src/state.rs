@@ -6,6 +6,9 @@
 //! under the episode's lock, so of two concurrent actions for one step exactly one is applied.
 //! Lock order: the episode table, then one episode, then the database.
 //!
+//! The create request an episode starts from is [`crate::request`]; the protocol's names and
+//! limits are [`crate::protocol`].
+//!
 //! Hidden means hidden: nothing built here for a running episode carries geometry, ground truth,
 //! reference points, coverage, CD or a number derived from them, except `metrics` on public
 //! splits; file paths never leave the server.
@@ -15,7 +18,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use objview_episode::{Action, Budget, Episode, EpisodeSettings, ExecutionMode, MethodInfo, TerminalSource};
+use objview_episode::{Action, Episode, EpisodeSettings, MethodInfo, TerminalSource};
 use objview_geom::Pose;
 use objview_render::Camera;
 use objview_views::{ViewSet, ViewSpace};
@@ -25,195 +28,20 @@ use serde_json::{json, Value};
 use crate::auth::{Caller, Tokens};
 use crate::db::{ActionRow, Db, EpisodeRow};
 use crate::error::{ApiError, ServerError};
-use crate::pool::{ObjectKey, Pool, SceneCache, CANDIDATE_SETS, VIEW_SPACES};
+use crate::pool::{ObjectKey, Pool, SceneCache};
+use crate::protocol::{CANDIDATE_SETS, VIEW_SPACES};
+use crate::request::CreateSpec;
 use crate::spec::RunRecord;
 
-/// Most poses in one feasibility query.
-pub const MAX_FEASIBLE_POSES: usize = 4_096;
-
-/// Families a remote planner may declare (`oracle` is refused: it reads ground truth).
-pub const FAMILIES: [&str; 4] = ["classical", "learned", "hybrid", "baseline"];
-
-/// A validated create request: everything needed to start the episode again (it is stored, and
-/// replayed after a restart).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct CreateSpec {
-    pub split: String,
-    /// The object's uid.
-    pub object: String,
-    pub view_space: String,
-    /// `auto` or K.
-    pub budget: String,
-    pub method: String,
-    pub family: String,
-    pub execution_mode: String,
-    pub candidate_set: String,
-    /// The user seed.
-    pub seed: u64,
-    pub params: Value,
-    pub record_timings: bool,
-}
-
-fn field<'a>(m: &'a serde_json::Map<String, Value>, name: &str) -> Option<&'a Value> {
-    m.get(name).filter(|v| !v.is_null())
-}
-
-fn string_field(
-    m: &serde_json::Map<String, Value>,
-    name: &str,
-    default: Option<&str>,
-) -> Result<String, ApiError> {
-    match field(m, name) {
-        None => default
-            .map(str::to_string)
-            .ok_or_else(|| ApiError::InvalidRequest(format!("missing field `{name}`"))),
-        Some(Value::String(s)) => Ok(s.clone()),
-        Some(other) => Err(ApiError::InvalidRequest(format!("`{name}` must be a string, got {other}"))),
-    }
-}
-
-fn one_of(name: &str, value: String, allowed: &[&str]) -> Result<String, ApiError> {
-    if allowed.contains(&value.as_str()) {
-        Ok(value)
-    } else {
-        Err(ApiError::InvalidRequest(format!("unknown {name} {value:?} (known: {})", allowed.join(", "))))
-    }
-}
-
-/// Whether `s` is a valid method name: 1–100 characters of `A-Z a-z 0-9 . _ + -`.
-pub fn valid_method_name(s: &str) -> bool {
-    (1..=100).contains(&s.len()) && s.chars().all(|c| c.is_ascii_alphanumeric() || "._+-".contains(c))
-}
-
-impl CreateSpec {
-    /// Validates a create request body against the pool (docs/server-api.md, `POST
-    /// /v1/episodes`): 422 for a wrong shape or an unknown split, view space, candidate set or
-    /// budget; 404 for an unknown object.
-    pub fn parse(body: &Value, pool: &Pool) -> Result<CreateSpec, ApiError> {
-        let Value::Object(m) = body else {
-            return Err(ApiError::InvalidRequest("the body must be a JSON object".into()));
-        };
-        let split_id = string_field(m, "split", None)?;
-        let split = pool.split(&split_id).ok_or_else(|| {
-            ApiError::InvalidRequest(format!(
-                "unknown split {split_id:?} (splits: {})",
-                pool.splits.iter().map(|s| s.id.as_str()).collect::<Vec<_>>().join(", ")
-            ))
-        })?;
-        let key = match field(m, "object") {
-            None => return Err(ApiError::InvalidRequest("missing field `object`".into())),
-            Some(Value::String(s)) => ObjectKey::Uid(s.clone()),
-            Some(Value::Number(n)) => match n.as_u64() {
-                Some(i) => ObjectKey::Index(i as usize),
-                None => {
-                    return Err(ApiError::InvalidRequest(format!(
-                        "`object` must be an index (a non-negative integer) or a uid, got {n}"
-                    )))
-                }
-            },
-            Some(other) => {
-                return Err(ApiError::InvalidRequest(format!(
-                    "`object` must be an index or a uid string, got {other}"
-                )))
-            }
-        };
-        let object = split
-            .object(&key)
-            .ok_or_else(|| {
-                ApiError::NotFound(match &key {
-                    ObjectKey::Index(i) => {
-                        format!("split {split_id} has no object {i} (it has {})", split.objects.len())
-                    }
-                    ObjectKey::Uid(u) => format!("split {split_id} has no object {u:?}"),
-                })
-            })?
-            .uid
-            .clone();
-        let view_space = one_of("view space", string_field(m, "view_space", None)?, &VIEW_SPACES)?;
-        let budget = match field(m, "budget") {
-            None => return Err(ApiError::InvalidRequest("missing field `budget`".into())),
-            Some(Value::String(s)) => Budget::parse(s),
-            Some(Value::Number(n)) => Budget::parse(&n.to_string()),
-            Some(other) => Err(format!("got {other}")),
-        }
-        .map_err(|e| {
-            ApiError::InvalidRequest(format!("`budget` must be \"auto\" or a positive integer: {e}"))
-        })?;
-        let method = string_field(m, "method", None)?;
-        if !valid_method_name(&method) {
-            return Err(ApiError::InvalidRequest(format!(
-                "`method` must be 1–100 characters of A-Z a-z 0-9 . _ + -, got {method:?}"
-            )));
-        }
-        let family = string_field(m, "family", Some("classical"))?;
-        if family == "oracle" {
-            return Err(ApiError::InvalidRequest(
-                "family `oracle` is refused: a remote planner never reads ground truth".into(),
-            ));
-        }
-        let family = one_of("family", family, &FAMILIES)?;
-        let execution_mode = one_of(
-            "execution_mode",
-            string_field(m, "execution_mode", Some("iterative"))?,
-            &["iterative", "budgeted_plan", "set_cover_plan"],
-        )?;
-        if execution_mode == "budgeted_plan" && budget == Budget::Auto {
-            return Err(ApiError::InvalidRequest(
-                "a budgeted_plan needs a fixed budget K, not \"auto\"".into(),
-            ));
-        }
-        let candidate_set =
-            one_of("candidate set", string_field(m, "candidate_set", Some("tammes-360"))?, &CANDIDATE_SETS)?;
-        let seed = match field(m, "seed") {
-            None => 0,
-            Some(v) => v.as_u64().ok_or_else(|| {
-                ApiError::InvalidRequest(format!("`seed` must be a non-negative integer, got {v}"))
-            })?,
-        };
-        let params = field(m, "params").cloned().unwrap_or_else(|| json!({}));
-        let record_timings = match field(m, "record_timings") {
-            None => true,
-            Some(Value::Bool(b)) => *b,
-            Some(other) => {
-                return Err(ApiError::InvalidRequest(format!(
-                    "`record_timings` must be true or false, got {other}"
-                )))
-            }
-        };
-        Ok(CreateSpec {
-            split: split_id,
-            object,
-            view_space,
-            budget: budget.label(),
-            method,
-            family,
-            execution_mode,
-            candidate_set,
-            seed,
-            params,
-            record_timings,
-        })
-    }
-
-    fn budget(&self) -> Budget {
-        Budget::parse(&self.budget).unwrap_or(Budget::Auto)
-    }
-
-    fn mode(&self) -> ExecutionMode {
-        serde_json::from_value(Value::String(self.execution_mode.clone())).unwrap_or(ExecutionMode::Iterative)
-    }
-}
-
-/// How an episode ended, as the API shows it.
+/// How an episode ended, as the API shows it (read back from stored result lines as written).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TerminalInfo {
+    /// The terminal source (`algorithm_stop`, `benchmark`, `exception`).
     pub source: String,
+    /// The terminal reason.
     pub reason: String,
+    /// Its detail.
     pub detail: String,
-}
-
-fn source_name(s: TerminalSource) -> String {
-    serde_json::to_value(s).ok().and_then(|v| v.as_str().map(str::to_string)).unwrap_or_default()
 }
 
 /// What is kept of a finished episode (read back from its result line on first use).
@@ -267,7 +95,7 @@ impl Running {
 
     fn obs(&self) -> Value {
         let t = self.ep.terminal().map(|t| TerminalInfo {
-            source: source_name(t.source),
+            source: t.source.to_string(),
             reason: t.reason.clone(),
             detail: t.detail.clone(),
         });
@@ -546,7 +374,7 @@ impl AppState {
         let candidates = self.candidate_sets.get(&spec.candidate_set).ok_or_else(|| {
             ApiError::InvalidRequest(format!("unknown candidate set {:?}", spec.candidate_set))
         })?;
-        let budget = spec.budget();
+        let budget = spec.budget;
         let start_pose = objview_views::start_pose(settings.view_radius);
         let record = RunRecord {
             planner: &spec.method,
@@ -564,8 +392,8 @@ impl AppState {
         .to_json();
         let method = MethodInfo {
             name: spec.method.clone(),
-            family: spec.family.clone(),
-            mode: spec.mode(),
+            family: spec.family,
+            mode: spec.execution_mode,
             params: spec.params.clone(),
         };
         let ep = Episode::start(scene, settings, method, budget, spec.seed, start_pose)
@@ -596,7 +424,7 @@ impl AppState {
             state: "running".into(),
         };
         self.db.insert_episode(&row).map_err(|e| internal("storing the episode", e))?;
-        let budget = spec.budget();
+        let budget = spec.budget;
         let start = ep.history()[0];
         let now = Instant::now();
         let running =
@@ -654,7 +482,7 @@ impl AppState {
         *live = Live::Finished(Some(Box::new(Finished {
             history: res.visited_poses.clone(),
             terminal: TerminalInfo {
-                source: source_name(res.terminal_source),
+                source: res.terminal_source.to_string(),
                 reason: res.terminal_reason.clone(),
                 detail: res.terminal_detail.clone(),
             },
@@ -927,16 +755,6 @@ impl axum::extract::FromRequestParts<Arc<AppState>> for Caller {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn method_names() {
-        for ok in ["my-nbv", "rse", "a.b_c+d-1", &"x".repeat(100)] {
-            assert!(valid_method_name(ok), "{ok}");
-        }
-        for bad in ["", "a/b", "a b", "é", &"x".repeat(101)] {
-            assert!(!valid_method_name(bad), "{bad}");
-        }
-    }
 
     /// A one-view result with step 0's CD = `cd`.
     fn one_view_result(cd: f64) -> objview_episode::EpisodeResult {

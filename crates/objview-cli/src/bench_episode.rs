@@ -40,7 +40,7 @@ impl EpisodeBenchArgs {
 }
 
 pub fn bench_episode(a: EpisodeBenchArgs) -> Result<()> {
-    let r = measure(&a.settings(), &crate::run::planners)?;
+    let r = measure(&a.settings(), crate::run::registry())?;
     println!(
         "{}: {} triangles, {} GT points; observable reference: {} points from {} views in {:.2} s ({:.1} ms/view)",
         a.object,

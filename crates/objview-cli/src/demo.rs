@@ -43,6 +43,6 @@ pub fn run(a: Args) -> Result<()> {
         no_episodes: a.no_episodes,
         test_fraction: a.test_fraction,
     };
-    plan.run(&crate::run::planners, &crate::common::TermProgress::new(false), &|msg| println!("{msg}"))?;
+    plan.run(crate::run::registry(), &crate::common::TermProgress::new(false), &|msg| println!("{msg}"))?;
     Ok(())
 }

@@ -22,7 +22,7 @@ mod serve;
 mod viewset;
 mod visibility;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 
 #[derive(Parser)]
 #[command(name = "objview", version, about = "Object-centric view-planning benchmark", long_about = None)]
@@ -69,7 +69,9 @@ enum Command {
 }
 
 fn main() {
-    let cli = match Cli::try_parse() {
+    // `objview run --help` lists the planners of the registry (a runtime table).
+    let command = Cli::command().mut_subcommand("run", |c| c.after_help(run::planners_help()));
+    let cli = match command.try_get_matches().and_then(|m| Cli::from_arg_matches(&m)) {
         Ok(cli) => cli,
         Err(e) => {
             use clap::error::ErrorKind;

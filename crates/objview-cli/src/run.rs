@@ -3,25 +3,24 @@
 //! (objects already in `--out` are skipped), written in input order whatever the thread count.
 
 use std::path::PathBuf;
-use std::sync::Arc;
-use std::time::Instant;
+use std::sync::{Arc, OnceLock};
 
 use anyhow::{bail, Context, Result};
 use clap::Parser;
-use objview_dataset::{resolve_inputs, ItemOutcome, ObjectRef};
+use objview_dataset::resolve_inputs;
 use objview_episode::{Budget, EpisodeSettings};
 use objview_geom::normalize::Normalization;
 use objview_geom::Pose;
-use objview_runs::episodes::{check_same_run, episode_note, failure_item};
+use objview_planners::registry::Registry;
 use objview_runs::{parse_params, EpisodePlan, RunSummary};
+use objview_server::remote::RemotePlan;
 use objview_views::{ViewSet, ViewSpace};
-use serde_json::json;
 
 use crate::common::TermProgress;
 
 #[derive(Parser, Clone)]
 pub struct Args {
-    /// Planner: random-tsp, rse, rse-mov, random, oracle.
+    /// Planner (the list is below; `--param` changes its settings).
     #[arg(long)]
     pub planner: String,
     /// A planner parameter `NAME=VALUE` (repeatable; VALUE is JSON or a bare string; dotted
@@ -98,12 +97,18 @@ pub struct Args {
     pub token: Option<String>,
 }
 
-/// The planner lookup of this binary: every table the CLI links.
-pub fn planners(
-    name: &str,
-    params: &[(String, serde_json::Value)],
-) -> Result<Box<dyn objview_episode::Planner>, String> {
-    objview_planners::registry::with_params(name, params)
+/// The planners this binary offers: the tables of every planner crate it links (today the
+/// classical planners of `objview-planners`).
+pub fn registry() -> &'static Registry {
+    static REGISTRY: OnceLock<Registry> = OnceLock::new();
+    REGISTRY.get_or_init(|| {
+        Registry::from_tables(&[objview_planners::registry::TABLE]).expect("planner names are unique")
+    })
+}
+
+/// The `--help` text after the options: every planner of [`registry`], one line each.
+pub fn planners_help() -> String {
+    format!("Planners (name, family, execution mode, summary):\n{}", registry().help())
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -167,35 +172,10 @@ pub fn plan(a: &Args) -> Result<EpisodePlan> {
 
 /// Runs the episodes of `a`.
 pub fn execute(a: &Args) -> Result<RunSummary> {
-    if let Some(url) = &a.server {
-        let t = Instant::now();
-        let budget = Budget::parse(&a.budget).map_err(anyhow::Error::msg).context("--budget")?;
-        let params = parse_params(&a.params)?;
-        let probe = planners(&a.planner, &params).map_err(anyhow::Error::msg)?;
-        objview_runs::episodes::check_budget(&a.planner, probe.as_ref(), budget)?;
-        return execute_remote(a, url, t, budget, &params, probe.as_ref());
-    }
-    let plan = plan(a)?;
-    Ok(plan.run(&planners, &TermProgress::new(a.quiet))?)
-}
-
-/// `run --server`: the same episodes against an evaluation server. Objects are `SPLIT` or
-/// `SPLIT:ID,ID,…` (uids or indices) of the server; settings that belong to the server are
-/// refused rather than silently ignored.
-fn execute_remote(
-    a: &Args,
-    url: &str,
-    t: Instant,
-    budget: Budget,
-    params: &[(String, serde_json::Value)],
-    probe: &dyn objview_episode::Planner,
-) -> Result<RunSummary> {
-    if probe.needs_ground_truth() {
-        bail!(
-            "--planner {} reads the ground truth: it cannot run against a server (run it locally)",
-            a.planner
-        );
-    }
+    let progress = TermProgress::new(a.quiet);
+    let Some(url) = &a.server else {
+        return Ok(plan(a)?.run(registry(), &progress)?);
+    };
     let server_side = [
         ("--start-pose", a.start_pose.is_some()),
         ("--cap", a.cap != 129),
@@ -206,97 +186,29 @@ fn execute_remote(
         ("--no-cache", a.no_cache),
         ("--normalize", a.normalize != Normalization::Unit),
     ];
+    let plan = RemotePlan {
+        url: url.clone(),
+        token: a.token.clone().or_else(|| std::env::var("OBJVIEW_TOKEN").ok()),
+        planner: a.planner.clone(),
+        params: parse_params(&a.params)?,
+        space: a.space.clone(),
+        budget: Budget::parse(&a.budget).map_err(anyhow::Error::msg).context("--budget")?,
+        candidates: a.candidates.clone(),
+        seed: a.seed,
+        record_timings: !a.no_timings,
+        objects: a.objects.clone(),
+        out: a.out.clone(),
+        threads: a.threads,
+        retry_failed: a.retry_failed,
+    };
+    // Settings that belong to the server are refused rather than silently ignored (after the
+    // planner and budget checks, which come first as for a local run).
+    let probe = registry().with_params(&plan.planner, &plan.params).map_err(anyhow::Error::msg)?;
+    objview_runs::episodes::check_budget(&plan.planner, probe.as_ref(), plan.budget)?;
     if let Some((flag, _)) = server_side.iter().find(|(_, given)| *given) {
-        bail!("{flag} is a setting of the server (objview serve), not of run --server");
-    }
-    anyhow::ensure!(
-        ViewSpace::builtin(&a.space).is_some(),
-        "--space {}: a server offers the built-in view spaces only (whole, hemi, quarter, eighth)",
-        a.space
-    );
-    let token = a.token.clone().or_else(|| std::env::var("OBJVIEW_TOKEN").ok());
-    let client = objview_server::client::Client::new(url, token.as_deref());
-    client.health().with_context(|| format!("--server {url}"))?;
-    let mut objects: Vec<ObjectRef> = Vec::new();
-    for spec in &a.objects {
-        // A split file's path names the split of that id (its stem), as the server does.
-        let spec = if objview_dataset::inputs::is_split_file(spec) {
-            objview_server::pool::split_id(spec)?
-        } else {
-            spec.to_string_lossy().into_owned()
-        };
-        let (split, ids) = match spec.split_once(':') {
-            Some((s, ids)) => (s, Some(ids)),
-            None => (spec.as_str(), None),
-        };
-        let uids = client.split_objects(split).with_context(|| format!("--objects {spec}"))?;
-        let chosen: Vec<String> = match ids {
-            None => uids.clone(),
-            Some(ids) => ids
-                .split(',')
-                .filter(|x| !x.is_empty())
-                .map(|id| match id.parse::<usize>() {
-                    Ok(i) if !uids.contains(&id.to_string()) => uids.get(i).cloned().with_context(|| {
-                        format!("--objects {spec}: split {split} has {} objects, no index {i}", uids.len())
-                    }),
-                    _ => uids
-                        .contains(&id.to_string())
-                        .then(|| id.to_string())
-                        .with_context(|| format!("--objects {spec}: split {split} has no object {id:?}")),
-                })
-                .collect::<Result<_>>()?,
-        };
-        for uid in chosen {
-            anyhow::ensure!(!objects.iter().any(|o| o.uid == uid), "--objects: object {uid} is named twice");
-            objects.push(ObjectRef { uid, mesh: PathBuf::from(split), gt_cloud: None, annotation: None });
+        if !probe.needs_ground_truth() {
+            bail!("{flag} is a setting of the server (objview serve), not of run --server");
         }
     }
-    let candidates = Arc::new(
-        client
-            .candidate_set(&a.candidates)
-            .with_context(|| format!("--candidates {} on the server", a.candidates))?,
-    );
-    // What this side knows of the settings record (the server writes the full one).
-    let record = objview_runs::provenance::settings(
-        "run",
-        json!({
-            "planner": a.planner,
-            "planner_params": probe.params(),
-            "view_space": a.space,
-            "budget": budget.label(),
-            "seed": a.seed,
-            "candidates": a.candidates,
-            "server": url,
-        }),
-    );
-    check_same_run(&a.out, &record)?;
-    let work = |obj: &ObjectRef| -> Result<String> {
-        let mut planner = planners(&a.planner, params).map_err(anyhow::Error::msg)?;
-        let ep = objview_server::client::RemoteEpisode {
-            split: obj.mesh.to_string_lossy().into_owned(),
-            object: obj.uid.clone(),
-            view_space: a.space.clone(),
-            budget,
-            candidate_set: a.candidates.clone(),
-            seed: a.seed,
-            record_timings: !a.no_timings,
-        };
-        Ok(objview_server::client::run_remote(&client, planner.as_mut(), &ep, candidates.clone())?)
-    };
-    let item = |obj: &ObjectRef| match work(obj) {
-        Ok(line) => {
-            let note = serde_json::from_str::<objview_episode::EpisodeResult>(&line)
-                .map(|r| episode_note(&r))
-                .unwrap_or_default();
-            ItemOutcome { line, failed: false, note }
-        }
-        Err(e) => failure_item(obj, "split", &obj.mesh.display().to_string(), &crate::one_line(&e), &record),
-    };
-    // The remote plan: only what the batch driver needs (results file, threads, labels).
-    let mut plan = EpisodePlan::new(&a.planner, Vec::new(), a.out.clone())?;
-    plan.budget = budget;
-    plan.threads = a.threads;
-    plan.retry_failed = a.retry_failed;
-    let s = plan.drive(&objects, &a.space, item, &TermProgress::new(a.quiet))?;
-    Ok(RunSummary::from_batch(&s, t))
+    Ok(plan.run(registry(), &progress)?)
 }

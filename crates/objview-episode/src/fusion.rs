@@ -15,8 +15,11 @@ use crate::grid::{
 /// One allocated block: the slot of each of its fine voxels and the list of its slots.
 #[derive(Debug, Clone)]
 pub struct FusedBlock {
+    /// The block's integer coordinates in the domain's block grid.
     pub key: [i32; 3],
+    /// Slot index of each fine voxel of the block, or [`NONE`] where nothing was fused.
     pub cells: Box<[u32; BLOCK_CELLS]>,
+    /// The slots of this block's occupied fine voxels, in allocation order.
     pub slots: Vec<u32>,
     /// Its entry in the cloud's [`SuperGrid`].
     pub handle: Option<SuperHandle>,
@@ -25,9 +28,11 @@ pub struct FusedBlock {
 /// The fused cloud: one point per occupied fine voxel.
 #[derive(Debug, Clone)]
 pub struct FusedCloud {
+    /// The fusion grid: origin-anchored voxels of the fusion size, grouped in blocks.
     pub domain: Domain,
     /// Block index of the domain → index into `blocks`, or [`NONE`].
     pub table: Vec<u32>,
+    /// The allocated blocks, in allocation order.
     pub blocks: Vec<FusedBlock>,
     /// Position of each slot (object frame).
     pub pos: Vec<[f64; 3]>,

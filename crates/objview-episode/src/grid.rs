@@ -131,7 +131,9 @@ pub struct SuperGrid {
 /// An axis-aligned box around a set of points (empty: lo = +∞, hi = −∞).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Aabb {
+    /// Per-axis minimum (object frame, normalized units).
     pub lo: [f64; 3],
+    /// Per-axis maximum (object frame, normalized units).
     pub hi: [f64; 3],
 }
 

@@ -32,6 +32,7 @@ pub struct Reference {
     pub points: Vec<[f64; 3]>,
     /// The feasible reference poses, in order.
     pub poses: Vec<Pose>,
+    /// What result lines record about it (sizes, view set, observable SC, cache key).
     pub info: ReferenceInfo,
 }
 

@@ -17,10 +17,13 @@ use crate::EpisodeError;
 /// Where an object comes from.
 #[derive(Debug, Clone)]
 pub struct SceneSource<'a> {
+    /// The object's id (results' `uid`).
     pub uid: &'a str,
+    /// The mesh file.
     pub mesh: &'a Path,
     /// Ground-truth cloud file (mesh file frame), or `None` to sample one (SPEC §1).
     pub gt_cloud: Option<&'a Path>,
+    /// How the mesh is normalized (SPEC §1 `unit`, or `none` for pre-normalized assets).
     pub normalization: Normalization,
 }
 

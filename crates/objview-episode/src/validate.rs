@@ -23,13 +23,23 @@ pub const POSE_FIELDS: [&str; 7] = ["cx", "cy", "cz", "lx", "ly", "lz", "roll"];
 pub enum PoseError {
     /// One of the 7 numbers is NaN or infinite.
     #[error("the pose is not 7 finite numbers: `{field}` is {value}")]
-    NotFinite { field: &'static str, value: f64 },
+    NotFinite {
+        /// Which of the 7 numbers (`cx`, …, `roll`).
+        field: &'static str,
+        /// Its value.
+        value: f64,
+    },
     /// The camera centre or the look-at point is too far from the origin.
     #[error(
         "the {point} is {} object units from the origin; at most {MAX_POSE_DISTANCE} are allowed",
         distance_text(*.distance)
     )]
-    TooFar { point: &'static str, distance: f64 },
+    TooFar {
+        /// `camera centre` or `look-at point`.
+        point: &'static str,
+        /// Its distance from the origin, normalized object units.
+        distance: f64,
+    },
     /// Camera centre = look-at point: no viewing direction.
     #[error("pose centre equals its look-at point (no viewing direction)")]
     NoDirection,

@@ -10,8 +10,6 @@
 //! [`registry`] knows them by name: one row per planner ([`registry::PlannerEntry`], next to
 //! the planner), collected in [`registry::TABLE`].
 
-#![warn(missing_docs)]
-
 pub mod occupancy;
 pub mod oracle;
 pub mod random;

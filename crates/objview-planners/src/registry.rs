@@ -29,7 +29,6 @@
 //! The free functions [`by_name`] and [`with_params`] and the constants [`NAMES`] and
 //! [`CLASSICAL`] are this crate's table alone, as before the table existed.
 
-use objview_episode::engine::mode_name;
 use objview_episode::{ExecutionMode, Family, Planner};
 use serde::de::DeserializeOwned;
 use serde::Serialize;
@@ -237,12 +236,12 @@ impl Registry {
         let width = |f: &dyn Fn(&PlannerEntry) -> usize| self.entries.iter().map(f).max().unwrap_or(0);
         let wn = width(&|e| e.name.len());
         let wf = width(&|e| e.family.title().len());
-        let wm = width(&|e| mode_name(e.mode).len());
+        let wm = width(&|e| e.mode.to_string().len());
         let lines: Vec<String> = self
             .entries
             .iter()
             .map(|e| {
-                format!("{:wn$}  {:wf$}  {:wm$}  {}", e.name, e.family.title(), mode_name(e.mode), e.summary)
+                format!("{:wn$}  {:wf$}  {:wm$}  {}", e.name, e.family.title(), e.mode.to_string(), e.summary)
             })
             .collect();
         lines.join("\n")
@@ -439,7 +438,7 @@ mod tests {
         assert_eq!(lines.len(), registry.entries().len());
         for (line, row) in lines.iter().zip(registry.entries()) {
             assert!(line.starts_with(row.name), "{line}");
-            assert!(line.contains(row.family.title()) && line.contains(mode_name(row.mode)), "{line}");
+            assert!(line.contains(row.family.title()) && line.contains(&row.mode.to_string()), "{line}");
             assert!(line.ends_with(row.summary), "{line}");
         }
         // Aligned columns: every summary starts at the same offset.

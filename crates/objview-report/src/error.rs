@@ -14,7 +14,12 @@ use thiserror::Error;
 pub enum ReportError {
     /// Reading an input or writing an output file failed.
     #[error("{path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        source: std::io::Error,
+    },
     /// The annotation files could not be read (the inner error names the file and line).
     #[error("annotations: {0}")]
     Annotations(#[from] DatasetError),
@@ -23,7 +28,12 @@ pub enum ReportError {
     Plot(#[from] PlotError),
     /// A report setting is out of range.
     #[error("invalid setting {name}: {reason}")]
-    InvalidSetting { name: &'static str, reason: String },
+    InvalidSetting {
+        /// The setting's name.
+        name: &'static str,
+        /// Why its value is refused.
+        reason: String,
+    },
     /// No results file was given.
     #[error("no episode result files given")]
     NoInputs,

@@ -33,8 +33,9 @@ use rayon::prelude::*;
 use serde_json::json;
 
 use crate::annotate::AnnotatePlan;
-use crate::episodes::{EpisodePlan, PlannerFactory};
+use crate::episodes::EpisodePlan;
 use crate::RunError;
+use objview_planners::registry::Registry;
 
 /// The demo's settings.
 #[derive(Debug, Clone)]
@@ -105,7 +106,7 @@ impl DemoPlan {
     /// batch, `say` every message.
     pub fn run(
         &self,
-        planners: PlannerFactory<'_>,
+        planners: &Registry,
         progress: &dyn Progress,
         say: &dyn Fn(&str),
     ) -> Result<(), RunError> {
@@ -211,7 +212,7 @@ impl DemoPlan {
     fn difficulty_stages(
         &self,
         objects: &[PathBuf],
-        planners: PlannerFactory<'_>,
+        planners: &Registry,
         progress: &dyn Progress,
         say: &dyn Fn(&str),
     ) -> Result<(), RunError> {
@@ -253,7 +254,7 @@ impl DemoPlan {
     fn episode_stages(
         &self,
         annotations: &Path,
-        planners: PlannerFactory<'_>,
+        planners: &Registry,
         say: &dyn Fn(&str),
     ) -> Result<(), RunError> {
         let splits = self.out.join("splits");
@@ -333,7 +334,7 @@ impl DemoPlan {
     fn demo_run(
         &self,
         plan: &EpisodePlan,
-        planners: PlannerFactory<'_>,
+        planners: &Registry,
         say: &dyn Fn(&str),
     ) -> Result<PathBuf, RunError> {
         let s = plan.run(planners, &Silent)?;

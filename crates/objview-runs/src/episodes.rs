@@ -24,10 +24,7 @@ use serde_json::{json, Value};
 use crate::params::Params;
 use crate::record::RunRecord;
 use crate::RunError;
-
-/// Makes a fresh planner from a name and parameters (the planner registry's lookup).
-pub type PlannerFactory<'a> =
-    &'a (dyn Fn(&str, &[(String, Value)]) -> Result<Box<dyn Planner>, String> + Sync);
+use objview_planners::registry::Registry;
 
 /// One episode run over objects, fully resolved.
 #[derive(Debug, Clone)]
@@ -134,8 +131,8 @@ impl EpisodePlan {
     /// Checks what can be checked before any episode: the planner and its parameters, the
     /// budget against its execution mode, the settings, the start pose's feasibility, the
     /// ground-truth folder. Returns a probe planner (for its recorded parameters).
-    pub fn validate(&self, planners: PlannerFactory<'_>) -> Result<Box<dyn Planner>, RunError> {
-        let probe = planners(&self.planner, &self.params).map_err(RunError::Invalid)?;
+    pub fn validate(&self, planners: &Registry) -> Result<Box<dyn Planner>, RunError> {
+        let probe = planners.with_params(&self.planner, &self.params).map_err(RunError::Invalid)?;
         check_budget(&self.planner, probe.as_ref(), self.budget)?;
         self.settings.validate().map_err(RunError::Invalid)?;
         if !self.space.is_feasible(&self.start_pose) {
@@ -174,7 +171,7 @@ impl EpisodePlan {
     pub fn episode(
         &self,
         obj: &ObjectRef,
-        planners: PlannerFactory<'_>,
+        planners: &Registry,
         record: &Value,
     ) -> Result<EpisodeResult, RunError> {
         let gt = gt_cloud_path(obj, self.gt_cloud_dir.as_deref())?;
@@ -191,7 +188,7 @@ impl EpisodePlan {
             &self.settings,
             self.cache_dir.as_deref(),
         )?);
-        let mut planner = planners(&self.planner, &self.params).map_err(RunError::Invalid)?;
+        let mut planner = planners.with_params(&self.planner, &self.params).map_err(RunError::Invalid)?;
         Ok(run_episode(
             scene,
             planner.as_mut(),
@@ -205,7 +202,7 @@ impl EpisodePlan {
     }
 
     /// Runs the plan's episodes into its results file.
-    pub fn run(&self, planners: PlannerFactory<'_>, progress: &dyn Progress) -> Result<RunSummary, RunError> {
+    pub fn run(&self, planners: &Registry, progress: &dyn Progress) -> Result<RunSummary, RunError> {
         let t = Instant::now();
         let probe = self.validate(planners)?;
         let record = self.record(probe.as_ref());
@@ -246,11 +243,8 @@ pub fn check_budget(name: &str, planner: &dyn Planner, budget: Budget) -> Result
 /// The progress note of an episode: `7 views, NSC@0.02 0.912, SC@0.02 0.871, path 9.42,
 /// plan_end (algorithm_stop)` (at its terminal checkpoint).
 pub fn episode_note(res: &EpisodeResult) -> String {
-    let source = serde_json::to_value(res.terminal_source)
-        .ok()
-        .and_then(|v| v.as_str().map(str::to_string))
-        .unwrap_or_default();
-    match res.checkpoints.get(objview_episode::result::TERMINAL_CHECKPOINT) {
+    let source = res.terminal_source;
+    match res.checkpoints.get(&objview_episode::CheckpointKey::Terminal) {
         Some(t) => format!(
             "{} views, NSC@0.02 {:.3}, SC@0.02 {:.3}, path {:.2}, {} ({source})",
             t.metrics.views,

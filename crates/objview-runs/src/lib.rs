@@ -26,7 +26,7 @@ pub mod pool;
 pub mod provenance;
 pub mod record;
 
-pub use episodes::{EpisodePlan, PlannerFactory, RunSummary};
+pub use episodes::{EpisodePlan, RunSummary};
 pub use params::{parse_params, Params};
 
 /// Errors of a run: bad settings found before any item runs, or a results file that cannot be
@@ -38,31 +38,31 @@ pub enum RunError {
     Invalid(String),
     /// Inputs, results files, annotation.
     #[error(transparent)]
-    Dataset(#[from] objview_dataset::DatasetError),
+    Dataset(Box<objview_dataset::DatasetError>),
     /// Episode set-up.
     #[error(transparent)]
-    Episode(#[from] objview_episode::EpisodeError),
+    Episode(Box<objview_episode::EpisodeError>),
     /// The object pool (splits).
     #[error(transparent)]
-    Pool(#[from] objview_pool::PoolError),
+    Pool(Box<objview_pool::PoolError>),
     /// Reports.
     #[error(transparent)]
-    Report(#[from] objview_report::ReportError),
+    Report(Box<objview_report::ReportError>),
     /// Figures.
     #[error(transparent)]
-    Plot(#[from] objview_plot::PlotError),
+    Plot(Box<objview_plot::PlotError>),
     /// Geometry (the demo's objects).
     #[error(transparent)]
-    Geom(#[from] objview_geom::GeomError),
+    Geom(Box<objview_geom::GeomError>),
     /// View sets and view spaces.
     #[error(transparent)]
-    Views(#[from] objview_views::ViewsError),
+    Views(Box<objview_views::ViewsError>),
     /// Voxelization.
     #[error(transparent)]
-    Voxel(#[from] objview_voxel::VoxelError),
+    Voxel(Box<objview_voxel::VoxelError>),
     /// Writing an image.
     #[error(transparent)]
-    Image(#[from] objview_render::preview::PreviewError),
+    Image(Box<objview_render::preview::PreviewError>),
     /// Writing an output file.
     #[error("{path}: {source}")]
     Io {
@@ -72,6 +72,29 @@ pub enum RunError {
         source: std::io::Error,
     },
 }
+
+/// `From` for each boxed source error (boxed so that `Result<_, RunError>` stays small).
+macro_rules! boxed_from {
+    ($($variant:ident: $t:ty),* $(,)?) => {
+        $(impl From<$t> for RunError {
+            fn from(e: $t) -> RunError {
+                RunError::$variant(Box::new(e))
+            }
+        })*
+    };
+}
+
+boxed_from!(
+    Dataset: objview_dataset::DatasetError,
+    Episode: objview_episode::EpisodeError,
+    Pool: objview_pool::PoolError,
+    Report: objview_report::ReportError,
+    Plot: objview_plot::PlotError,
+    Geom: objview_geom::GeomError,
+    Views: objview_views::ViewsError,
+    Voxel: objview_voxel::VoxelError,
+    Image: objview_render::preview::PreviewError,
+);
 
 impl RunError {
     /// Shorthand for [`RunError::Io`].

@@ -174,7 +174,7 @@ async fn openapi() -> Json<Value> {
 }
 
 async fn health() -> Json<Value> {
-    Json(json!({"status": "ok", "version": crate::spec::VERSION}))
+    Json(json!({"status": "ok", "version": objview_runs::record::VERSION}))
 }
 
 async fn splits(State(st): State<Arc<AppState>>, _c: Caller) -> Json<Value> {

@@ -74,6 +74,7 @@ pub fn owner_id(token: &str) -> String {
 /// it fails with 401 `unauthorized` when the server has tokens and the request has no known one.
 #[derive(Debug, Clone)]
 pub struct Caller {
+    /// The token's owner name (episodes belong to it).
     pub owner: String,
 }
 

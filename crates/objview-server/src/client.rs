@@ -20,7 +20,14 @@ use serde_json::{json, Value};
 pub enum ClientError {
     /// The server answered with an error.
     #[error("{status} {code}: {message}")]
-    Api { status: u16, code: String, message: String },
+    Api {
+        /// HTTP status.
+        status: u16,
+        /// The error code of the body (`invalid_action`, …).
+        code: String,
+        /// The error message of the body.
+        message: String,
+    },
     /// The request did not reach the server, or its answer did not arrive.
     #[error("{0}")]
     Transport(String),
@@ -49,12 +56,15 @@ fn protocol(what: impl std::fmt::Display) -> ClientError {
 /// A raw answer: status, headers we care about, body.
 #[derive(Debug, Clone)]
 pub struct RawResponse {
+    /// HTTP status.
     pub status: u16,
+    /// The `Content-Type` header.
     pub content_type: String,
     /// `X-Objview-Step`.
     pub step: Option<String>,
     /// `Server-Timing`.
     pub server_timing: Option<String>,
+    /// The body bytes.
     pub body: Vec<u8>,
 }
 
@@ -68,9 +78,11 @@ impl RawResponse {
 /// An observation's metadata (OBS).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Obs {
+    /// The observation's step (0 = start view).
     pub step: usize,
     /// The pose it was taken from.
     pub pose: Pose,
+    /// Whether the episode has ended.
     pub done: bool,
     /// `{"source", "reason", "detail"}` once done.
     pub terminal: Value,

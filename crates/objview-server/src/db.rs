@@ -28,11 +28,15 @@ impl From<rusqlite::Error> for DbError {
 /// An episode as stored.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EpisodeRow {
+    /// The episode id.
     pub id: String,
     /// Who created it (a token's hash; empty without tokens).
     pub owner: String,
+    /// The split id the object comes from.
     pub split: String,
+    /// The object's uid.
     pub uid: String,
+    /// The method (planner) name.
     pub method: String,
     /// The validated create request (JSON), enough to start the episode again.
     pub request: String,

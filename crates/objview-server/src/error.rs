@@ -112,10 +112,20 @@ pub enum ServerError {
     Pool(String),
     /// The tokens file.
     #[error("{path}: {reason}")]
-    Tokens { path: String, reason: String },
+    Tokens {
+        /// The tokens file.
+        path: String,
+        /// What is wrong with it.
+        reason: String,
+    },
     /// The database.
     #[error("database {path}: {reason}")]
-    Db { path: String, reason: String },
+    Db {
+        /// The database file.
+        path: String,
+        /// What went wrong.
+        reason: String,
+    },
     /// A bad setting (`--public` naming no split, a timeout that is not positive, …).
     #[error("{0}")]
     Config(String),
@@ -124,5 +134,10 @@ pub enum ServerError {
     Io(String),
     /// Recovering the episodes that were running when the server stopped.
     #[error("recovering episode {id}: {reason}")]
-    Recovery { id: String, reason: String },
+    Recovery {
+        /// The episode id.
+        id: String,
+        /// What went wrong.
+        reason: String,
+    },
 }

@@ -9,9 +9,11 @@
 //! - [`pool`] — split files and the cache of prepared scenes.
 //! - [`auth`] — bearer tokens and episode owners; [`error`] — errors and their statuses.
 //! - [`conn`] — the accept loop: connection cap, header / idle time limits.
-//! - [`spec`] — the result-line settings record shared with local `objview run`.
 //! - [`client`] — a blocking client, and the driver that runs a local [`objview_episode::Planner`]
-//!   against a server (`objview run --server`).
+//!   against a server; [`remote`] — a batch of such episodes over split objects
+//!   (`objview run --server`), on the shared batch driver.
+//!
+//! The settings record of result lines is `objview_runs::record` (shared with local runs).
 //! - [`load`] — the load generator of `objview bench serve`.
 //!
 //! Engine work (rendering, fusion, metrics) runs on tokio's blocking pool; the async side only
@@ -27,8 +29,8 @@ pub mod load;
 pub mod openapi;
 pub mod pool;
 pub mod protocol;
+pub mod remote;
 pub mod request;
-pub mod spec;
 pub mod state;
 
 use std::future::Future;

@@ -20,10 +20,13 @@ use crate::client::{Client, ClientError};
 pub struct LoadConfig {
     /// The server (`http://host:port`).
     pub url: String,
+    /// Bearer token, if the server asks for one.
     pub token: Option<String>,
     /// The split and object (an index, or a uid) every episode uses.
     pub split: String,
+    /// The object (uid or index) of the split.
     pub object: String,
+    /// The view space.
     pub view_space: String,
     /// Concurrent clients.
     pub clients: usize,
@@ -42,9 +45,13 @@ pub struct LoadConfig {
 /// Median and tail of a set of samples (milliseconds).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Latency {
+    /// Number of timed requests.
     pub samples: usize,
+    /// Median, milliseconds.
     pub p50_ms: f64,
+    /// 99th percentile (nearest rank), milliseconds.
     pub p99_ms: f64,
+    /// Mean, milliseconds.
     pub mean_ms: f64,
 }
 
@@ -64,7 +71,9 @@ impl Latency {
 /// The figures of one load run.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct LoadReport {
+    /// Concurrent clients.
     pub clients: usize,
+    /// Episodes run.
     pub episodes: usize,
     /// Move actions applied.
     pub steps: usize,

@@ -56,7 +56,7 @@ pub fn document() -> Value {
         "openapi": "3.0.3",
         "info": {
             "title": "objview evaluation server",
-            "version": crate::spec::VERSION,
+            "version": objview_runs::record::VERSION,
             "description": "Online view-planning episodes (SPEC §5) on hidden objects. See docs/server-api.md.",
         },
         "components": {

@@ -38,7 +38,9 @@ impl Split {
 /// How a request names an object: an index into its split or a uid.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum ObjectKey {
+    /// The object's index in the split.
     Index(usize),
+    /// The object's uid.
     Uid(String),
 }
 

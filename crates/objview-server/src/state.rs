@@ -31,7 +31,7 @@ use crate::error::{ApiError, ServerError};
 use crate::pool::{ObjectKey, Pool, SceneCache};
 use crate::protocol::{CANDIDATE_SETS, VIEW_SPACES};
 use crate::request::CreateSpec;
-use crate::spec::RunRecord;
+use objview_runs::record::RunRecord;
 
 /// How an episode ended, as the API shows it (read back from stored result lines as written).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

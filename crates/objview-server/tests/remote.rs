@@ -14,8 +14,8 @@ use objview_episode::{
 };
 use objview_geom::normalize::Normalization;
 use objview_geom::Pose;
+use objview_runs::record::RunRecord;
 use objview_server::client::{run_remote, Client, ClientError, RemoteEpisode};
-use objview_server::spec::RunRecord;
 use objview_views::{ViewSet, ViewSpace};
 
 /// The line a local `objview run` writes for `planner` on the hidden split's `uid`.

@@ -7,8 +7,6 @@
 //!   (rendered cloud), single views or batches, bitset helpers for unions and set cover.
 //! - [`mod@bench`]: per-view timing of both modes (`objview bench render`).
 
-#![warn(missing_docs)]
-
 pub mod bench;
 pub mod error;
 pub mod key;

@@ -20,8 +20,8 @@ use objview_views::{start_pose, ViewSet, ViewSpace};
 use serde_json::{json, Value};
 
 use super::{thread_pool, Spread};
-use crate::episodes::PlannerFactory;
 use crate::RunError;
+use objview_planners::registry::Registry;
 
 /// The planners whose planning time per step is measured, in order.
 pub const TIMED_PLANNERS: [&str; 2] = ["rse", "rse-mov"];
@@ -153,7 +153,7 @@ impl EpisodeBenchReport {
 /// current rayon pool, then a short episode of each of [`TIMED_PLANNERS`] made by `planners`.
 pub fn bench_episode(
     settings: &EpisodeBenchSettings,
-    planners: PlannerFactory<'_>,
+    planners: &Registry,
 ) -> Result<EpisodeBenchReport, RunError> {
     let name = &settings.object;
     let obj = objview_geom::synth::find(name)
@@ -212,7 +212,7 @@ pub fn bench_episode(
     let mut timings = Vec::new();
     if settings.planner_steps > 0 {
         for name in TIMED_PLANNERS {
-            let mut p = planners(name, &[]).map_err(RunError::Invalid)?;
+            let mut p = planners.by_name(name).map_err(RunError::Invalid)?;
             let s = EpisodeSettings { cap: settings.planner_steps + 1, ..episode.clone() };
             let r = run_episode(
                 scene.clone(),
@@ -264,7 +264,7 @@ mod tests {
             views: 3,
             planner_steps: 1,
         };
-        let r = bench_episode(&settings, &objview_planners::registry::with_params).unwrap();
+        let r = bench_episode(&settings, &objview_planners::registry::Registry::builtin()).unwrap();
         assert_eq!(r.engine_step_seconds.len(), 4, "the start and 3 views");
         for s in [r.engine, r.engine_all_threads].iter().chain(r.planners.iter().map(|p| &p.seconds)) {
             assert!(s.median.is_finite() && s.median >= 0.0, "{s:?}");

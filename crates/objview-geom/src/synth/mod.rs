@@ -17,6 +17,7 @@
 //! bounding a cavity face into the cavity. Thin things have real thickness.
 
 mod builder;
+pub mod random;
 mod shapes;
 
 use crate::{GeomError, Mesh};

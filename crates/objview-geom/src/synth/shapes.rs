@@ -11,21 +11,21 @@
 use super::builder::{pieces, Builder, Rgb, P2, P3};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
-const GREY: Rgb = [0.72, 0.72, 0.72];
-const RED: Rgb = [0.80, 0.18, 0.15];
-const ORANGE: Rgb = [0.92, 0.55, 0.15];
-const YELLOW: Rgb = [0.93, 0.82, 0.25];
-const GREEN: Rgb = [0.25, 0.62, 0.30];
-const TEAL: Rgb = [0.15, 0.55, 0.60];
-const BLUE: Rgb = [0.20, 0.35, 0.75];
-const PURPLE: Rgb = [0.52, 0.30, 0.65];
-const WHITE: Rgb = [0.93, 0.92, 0.88];
-const BROWN: Rgb = [0.50, 0.33, 0.18];
-const DARK: Rgb = [0.22, 0.22, 0.25];
+pub(super) const GREY: Rgb = [0.72, 0.72, 0.72];
+pub(super) const RED: Rgb = [0.80, 0.18, 0.15];
+pub(super) const ORANGE: Rgb = [0.92, 0.55, 0.15];
+pub(super) const YELLOW: Rgb = [0.93, 0.82, 0.25];
+pub(super) const GREEN: Rgb = [0.25, 0.62, 0.30];
+pub(super) const TEAL: Rgb = [0.15, 0.55, 0.60];
+pub(super) const BLUE: Rgb = [0.20, 0.35, 0.75];
+pub(super) const PURPLE: Rgb = [0.52, 0.30, 0.65];
+pub(super) const WHITE: Rgb = [0.93, 0.92, 0.88];
+pub(super) const BROWN: Rgb = [0.50, 0.33, 0.18];
+pub(super) const DARK: Rgb = [0.22, 0.22, 0.25];
 
 /// Sphere of radius `r` centred at `c`, faces outward (or into the ball's cavity when
 /// `inward`, for the inner surface of a hollow solid).
-fn ball(b: &mut Builder, c: P3, r: f64, inward: bool) {
+pub(super) fn ball(b: &mut Builder, c: P3, r: f64, inward: bool) {
     let mark = b.mark();
     let (a0, a1) = if inward { (FRAC_PI_2, -FRAC_PI_2) } else { (-FRAC_PI_2, FRAC_PI_2) };
     let mut p = b.profile([0.0, r * a0.sin()]);
@@ -84,7 +84,7 @@ pub(super) fn ellipsoid(b: &mut Builder) {
 }
 
 /// Torus around the z axis: tube radius `r` around a centre circle of radius `big_r`.
-fn torus_at(b: &mut Builder, big_r: f64, r: f64) {
+pub(super) fn torus_at(b: &mut Builder, big_r: f64, r: f64) {
     let mut p = b.profile([big_r + r, 0.0]);
     p.arc([big_r, 0.0], r, r, 0.0, TAU);
     b.revolve_closed(&p.close());
@@ -432,7 +432,7 @@ pub(super) fn ring_tower(b: &mut Builder) {
 }
 
 /// `n + 1` samples of a curve `f(t)`, `t` in `[0, 1]`, with `n` chosen from its length.
-fn sample_path(b: &Builder, f: impl Fn(f64) -> P3, closed: bool) -> Vec<P3> {
+pub(super) fn sample_path(b: &Builder, f: impl Fn(f64) -> P3, closed: bool) -> Vec<P3> {
     let m = 1024;
     let len: f64 = (0..m)
         .map(|i| {

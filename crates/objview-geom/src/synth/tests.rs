@@ -11,7 +11,7 @@ fn default_meshes() -> Vec<(SynthObject, Mesh)> {
     catalog().into_iter().map(|o| (o, o.build(Detail::DEFAULT))).collect()
 }
 
-fn signed_volume(m: &Mesh) -> f64 {
+pub(super) fn signed_volume(m: &Mesh) -> f64 {
     (0..m.num_triangles())
         .map(|t| {
             let [a, b, c] = m.triangle(t);
@@ -24,7 +24,7 @@ fn signed_volume(m: &Mesh) -> f64 {
 
 /// `Err` describing the first edge that is not shared by exactly two oppositely directed
 /// triangle sides.
-fn check_closed(m: &Mesh) -> Result<(), String> {
+pub(super) fn check_closed(m: &Mesh) -> Result<(), String> {
     let mut directed: HashMap<(u32, u32), u32> = HashMap::new();
     for tri in &m.triangles {
         for k in 0..3 {

@@ -62,9 +62,11 @@ pub struct Family {
 pub struct RandomObject {
     /// `p{seed}-{index:05}-{family}`: the file stem (and uid) of the object.
     pub name: String,
+    /// Its position in the pool (0-based): object i of pool S is the same for every N > i.
     pub index: usize,
     /// Seed of the object's own random stream ([`object_seed`]).
     pub object_seed: u64,
+    /// The parametric family it was drawn from (`objects list --families`).
     pub family: &'static str,
     /// The family's parameters as drawn (a JSON object; nested parts are arrays of objects).
     pub params: Value,

@@ -291,18 +291,38 @@ pub(super) fn slot_block(b: &mut Builder) {
 
 pub(super) fn gear(b: &mut Builder) {
     // Spur gear: 14 trapezoidal teeth (root radius 0.78, tip 1), a bore of radius 0.22, 0.25
-    // thick. The tooth outline has strictly increasing polar angle, so pairing every outline
-    // point with the bore point at the same angle gives non-crossing radial cap strips.
-    let (teeth, root, tip, bore, half) = (14, 0.78, 1.0, 0.22, 0.125);
+    // thick.
+    spur_gear(b, 14, 0.78, 1.0, 0.22, -0.125, 0.25, [0.5, 0.6, 0.9], ORANGE, YELLOW);
+}
+
+/// A spur gear around z between z0 and z0 + thickness: `teeth` trapezoidal teeth from `root`
+/// to `tip` radius, a bore of radius `bore`; `fr` are the tooth outline's fractions of a pitch
+/// (root arc end, tip start, tip end); the caps and the bottom have colour `top`, the
+/// outer wall `side`, the bore grey. The tooth outline has strictly increasing polar angle, so
+/// pairing every outline point with the bore point at the same angle gives non-crossing radial
+/// cap strips.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn spur_gear(
+    b: &mut Builder,
+    teeth: usize,
+    root: f64,
+    tip: f64,
+    bore: f64,
+    z0: f64,
+    thick: f64,
+    fr: [f64; 3],
+    top: Rgb,
+    side: Rgb,
+) {
+    let h = b.h;
     let pitch = TAU / teeth as f64;
     let polar = |r: f64, a: f64| [r * a.cos(), r * a.sin()];
-    // Each piece appends its points without its end point (the next piece starts there).
     let arc = |out: &mut Vec<P2>, r: f64, a0: f64, a1: f64| {
-        let n = pieces(r * (a1 - a0), b.h);
+        let n = pieces(r * (a1 - a0), h);
         out.extend((0..n).map(|i| polar(r, a0 + (a1 - a0) * i as f64 / n as f64)));
     };
     let line = |out: &mut Vec<P2>, p: P2, q: P2| {
-        let n = pieces((q[0] - p[0]).hypot(q[1] - p[1]), b.h);
+        let n = pieces((q[0] - p[0]).hypot(q[1] - p[1]), h);
         out.extend((0..n).map(|i| {
             let t = i as f64 / n as f64;
             [p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])]
@@ -310,21 +330,19 @@ pub(super) fn gear(b: &mut Builder) {
     };
     let mut outline: Vec<P2> = Vec::new();
     for k in 0..teeth {
-        let f = [0.0, 0.5, 0.6, 0.9, 1.0].map(|s| (k as f64 + s) * pitch);
+        let f = [0.0, fr[0], fr[1], fr[2], 1.0].map(|s| (k as f64 + s) * pitch);
         arc(&mut outline, root, f[0], f[1]);
         line(&mut outline, polar(root, f[1]), polar(tip, f[2]));
         arc(&mut outline, tip, f[2], f[3]);
         line(&mut outline, polar(tip, f[3]), polar(root, f[4]));
     }
-    // Cross-section loop in (t, z), t = 0 at the bore and 1 on the outline, traversed with the
-    // solid on its left: bottom outward, outer wall up, top inward, bore down.
-    let m = pieces(tip - bore, b.h);
-    let q = pieces(2.0 * half, b.h);
+    let m = pieces(tip - bore, h);
+    let q = pieces(thick, h);
     let mut section: Vec<(f64, f64, Rgb)> = Vec::new();
-    (0..m).for_each(|i| section.push((i as f64 / m as f64, -half, ORANGE)));
-    (0..q).for_each(|i| section.push((1.0, -half + 2.0 * half * i as f64 / q as f64, YELLOW)));
-    (0..m).for_each(|i| section.push((1.0 - i as f64 / m as f64, half, ORANGE)));
-    (0..q).for_each(|i| section.push((0.0, half - 2.0 * half * i as f64 / q as f64, GREY)));
+    (0..m).for_each(|i| section.push((i as f64 / m as f64, z0, top)));
+    (0..q).for_each(|i| section.push((1.0, z0 + thick * i as f64 / q as f64, side)));
+    (0..m).for_each(|i| section.push((1.0 - i as f64 / m as f64, z0 + thick, top)));
+    (0..q).for_each(|i| section.push((0.0, z0 + thick - thick * i as f64 / q as f64, GREY)));
     let rows: Vec<Vec<P3>> = section
         .iter()
         .map(|&(t, z, _)| {
@@ -338,7 +356,6 @@ pub(super) fn gear(b: &mut Builder) {
                 .collect()
         })
         .collect();
-    // Band j runs from section point j to j + 1 and has the colour of the segment it starts.
     let colors: Vec<Rgb> = section.iter().map(|s| s.2).collect();
     b.sheet(&rows, &colors, true);
 }

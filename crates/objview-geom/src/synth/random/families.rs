@@ -6,7 +6,7 @@
 //! same object comes out at every tessellation.
 
 use super::super::builder::{pieces, Rgb, P2, P3};
-use super::super::shapes::{DARK, GREY, WHITE};
+use super::super::shapes::{spur_gear, DARK, GREY, WHITE};
 use super::parts::*;
 use super::{round4, Family, Gen};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
@@ -333,68 +333,6 @@ fn pot(g: &mut Gen) {
     }
 }
 
-/// A spur gear around z between z0 and z0 + thickness: `teeth` trapezoidal teeth from `root`
-/// to `tip` radius, a bore of radius `bore`; `fr` are the tooth outline's fractions of a pitch
-/// (root arc end, tip start, tip end).
-#[allow(clippy::too_many_arguments)]
-fn gear_part(
-    g: &mut Gen,
-    teeth: usize,
-    root: f64,
-    tip: f64,
-    bore: f64,
-    z0: f64,
-    thick: f64,
-    fr: [f64; 3],
-    side: Rgb,
-) {
-    let h = g.b.h;
-    let pitch = TAU / teeth as f64;
-    let polar = |r: f64, a: f64| [r * a.cos(), r * a.sin()];
-    let arc = |out: &mut Vec<P2>, r: f64, a0: f64, a1: f64| {
-        let n = pieces(r * (a1 - a0), h);
-        out.extend((0..n).map(|i| polar(r, a0 + (a1 - a0) * i as f64 / n as f64)));
-    };
-    let line = |out: &mut Vec<P2>, p: P2, q: P2| {
-        let n = pieces((q[0] - p[0]).hypot(q[1] - p[1]), h);
-        out.extend((0..n).map(|i| {
-            let t = i as f64 / n as f64;
-            [p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])]
-        }));
-    };
-    let mut outline: Vec<P2> = Vec::new();
-    for k in 0..teeth {
-        let f = [0.0, fr[0], fr[1], fr[2], 1.0].map(|s| (k as f64 + s) * pitch);
-        arc(&mut outline, root, f[0], f[1]);
-        line(&mut outline, polar(root, f[1]), polar(tip, f[2]));
-        arc(&mut outline, tip, f[2], f[3]);
-        line(&mut outline, polar(tip, f[3]), polar(root, f[4]));
-    }
-    let top = g.b.color;
-    let m = pieces(tip - bore, h);
-    let q = pieces(thick, h);
-    let mut section: Vec<(f64, f64, Rgb)> = Vec::new();
-    (0..m).for_each(|i| section.push((i as f64 / m as f64, z0, top)));
-    (0..q).for_each(|i| section.push((1.0, z0 + thick * i as f64 / q as f64, side)));
-    (0..m).for_each(|i| section.push((1.0 - i as f64 / m as f64, z0 + thick, top)));
-    (0..q).for_each(|i| section.push((0.0, z0 + thick - thick * i as f64 / q as f64, GREY)));
-    let rows: Vec<Vec<P3>> = section
-        .iter()
-        .map(|&(t, z, _)| {
-            outline
-                .iter()
-                .map(|o| {
-                    let r_o = o[0].hypot(o[1]);
-                    let s = bore + t * (r_o - bore);
-                    [o[0] * s / r_o, o[1] * s / r_o, z]
-                })
-                .collect()
-        })
-        .collect();
-    let colors: Vec<Rgb> = section.iter().map(|s| s.2).collect();
-    g.b.sheet(&rows, &colors, true);
-}
-
 fn gear(g: &mut Gen) {
     let teeth = g.int("teeth", 6, 32);
     let root = g.f("root_radius", 0.6, 0.9);
@@ -405,7 +343,8 @@ fn gear(g: &mut Gen) {
     let c = (b + g.f("tip_arc", 0.08, 0.3)).min(0.96);
     let side = g.paint();
     g.b.color = GREY;
-    gear_part(g, teeth, root, 1.0, bore, 0.0, thick, [a, b, c], side);
+    let top = g.b.color;
+    spur_gear(&mut g.b, teeth, root, 1.0, bore, 0.0, thick, [a, b, c], top, side);
     if g.chance("second_gear", 0.35) {
         let s = g.f("second_scale", 0.35, 0.8);
         let teeth2 = g.int("second_teeth", 6, 24);
@@ -413,7 +352,19 @@ fn gear(g: &mut Gen) {
         let side = g.paint();
         // Its bore matches the first one's so the pair shares one axle hole.
         let root2 = (root * s).max(bore + 0.06);
-        gear_part(g, teeth2, root2, (s).max(root2 + 0.04), bore, thick - 0.01, thick2, [a, b, c], side);
+        let top = g.b.color;
+        spur_gear(
+            &mut g.b,
+            teeth2,
+            root2,
+            s.max(root2 + 0.04),
+            bore,
+            thick - 0.01,
+            thick2,
+            [a, b, c],
+            top,
+            side,
+        );
     }
 }
 

@@ -5,7 +5,7 @@
 //! normalization happen afterwards. No draw may depend on the builder's edge length, so the
 //! same object comes out at every tessellation.
 
-use super::super::builder::{pieces, Rgb, P2, P3};
+use super::super::builder::{pieces, P3};
 use super::super::shapes::{spur_gear, DARK, GREY, WHITE};
 use super::parts::*;
 use super::{round4, Family, Gen};

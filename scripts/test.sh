@@ -15,10 +15,12 @@ echo "== cargo clippy"
 # Same profile as the tests, so the C++ solver (HiGHS) that a build script compiles is built once.
 cargo clippy --workspace --all-targets --locked --profile ci -- -D warnings
 echo "== cargo test"
-cargo test --workspace --locked --profile ci
+# The learned-data test keeps the dataset it wrote for the Python loader's contract test.
+learn_data="$(mktemp -d)/learn-dataset"
+OBJVIEW_KEEP_LEARN_DATASET="$learn_data" cargo test --workspace --locked --profile ci
 echo "== python client and Gymnasium env (pytest against a real objview serve)"
 # `cargo test` above built the binary the CLI tests use; the Python suite starts it as a server.
 # The path must be absolute: run_tests.sh runs pytest from python/tests.
 target_dir="${CARGO_TARGET_DIR:-target}"
 case "$target_dir" in /*) ;; *) target_dir="$PWD/$target_dir" ;; esac
-OBJVIEW_BIN="${OBJVIEW_BIN:-$target_dir/ci/objview}" bash python/run_tests.sh
+OBJVIEW_LEARN_DATASET="$learn_data" OBJVIEW_BIN="${OBJVIEW_BIN:-$target_dir/ci/objview}" bash python/run_tests.sh

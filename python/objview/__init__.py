@@ -7,9 +7,12 @@
 - :func:`run_planner`: the loop that runs a :class:`Planner` over a split.
 - :mod:`objview.gym`: :class:`objview.gym.ObjViewEnv`, a Gymnasium environment (imported on
   demand so that the client works without importing gymnasium).
+- :mod:`objview.learn`: the reader of the oracle training data that ``objview learn dataset``
+  writes (numpy only): :class:`objview.learn.CaseDataset`, :func:`objview.learn.iter_batches`.
 - Errors: :class:`ServerError` and its subclasses, one per error code of the contract.
 """
 
+from . import learn
 from .client import STOP_REASONS, Client, Episode, Observation, pose_to_json
 from .errors import (
     EpisodeFinished,
@@ -50,4 +53,5 @@ __all__ = [
     "EpisodeRunning",
     "PayloadTooLarge",
     "InvalidRequest",
+    "learn",
 ]

@@ -10,6 +10,7 @@ mod bench_serve;
 mod common;
 mod demo;
 mod feasibility;
+mod learn;
 mod objects;
 mod pool;
 mod pool_build;
@@ -64,6 +65,9 @@ enum Command {
     Export(serve::ExportArgs),
     /// Tables 2–5 of the paper, full summaries and figures from episode results.
     Report(report::Args),
+    /// Learned planners: oracle training data, training, evaluation, benchmarks.
+    #[command(subcommand)]
+    Learn(learn::Command),
     /// The main job on the built-in objects: synthesize, render, annotate visibility, summarize.
     Demo(demo::Args),
 }
@@ -100,6 +104,7 @@ fn main() {
         Command::Export(a) => serve::export(a),
         Command::Report(a) => report::run(a),
         Command::Demo(a) => demo::run(a),
+        Command::Learn(c) => learn::run(c),
     };
     if let Err(e) = result {
         eprintln!("error: {}", one_line(&e));

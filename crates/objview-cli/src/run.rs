@@ -102,7 +102,8 @@ pub struct Args {
 pub fn registry() -> &'static Registry {
     static REGISTRY: OnceLock<Registry> = OnceLock::new();
     REGISTRY.get_or_init(|| {
-        Registry::from_tables(&[objview_planners::registry::TABLE]).expect("planner names are unique")
+        Registry::from_tables(&[objview_planners::registry::TABLE, objview_learn::TABLE])
+            .expect("planner names are unique")
     })
 }
 

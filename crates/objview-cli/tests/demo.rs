@@ -40,8 +40,11 @@ fn demo_runs_every_stage_and_resumes() {
             assert!(out.join(format!("figures/{f}.{ext}")).is_file(), "{f}.{ext}");
         }
     }
-    // Episodes: every classical planner in both spaces, and the oracle.
+    // Episodes: every classical planner in both spaces, the learned nbv-net (shipped weights),
+    // and the oracle.
     for f in [
+        "nbv-net_whole_auto",
+        "nbv-net_quarter_auto",
         "random-tsp_whole_5",
         "random-tsp_whole_30",
         "rse_whole_auto",
@@ -59,7 +62,7 @@ fn demo_runs_every_stage_and_resumes() {
         );
     }
     let md = std::fs::read_to_string(out.join("report/report.md")).unwrap();
-    for t in ["Table 2", "Table 3", "Table 4", "Table 5", "rse-mov", "random-tsp"] {
+    for t in ["Table 2", "Table 3", "Table 4", "Table 5", "rse-mov", "random-tsp", "nbv-net"] {
         assert!(md.contains(t), "report lacks {t}");
     }
     let episodes = std::fs::read_to_string(out.join("episodes/rse_whole_auto.jsonl")).unwrap();

@@ -300,6 +300,32 @@ pub fn gt_cloud_path(obj: &ObjectRef, dir: Option<&Path>) -> Result<Option<PathB
     Err(DatasetError::MissingGtCloud { uid: obj.uid.clone(), dir: dir.to_path_buf() })
 }
 
+/// The ground-truth cloud of `obj` in the normalized frame of `mesh` (`transform` is what
+/// normalization applied to the mesh): the pool's cloud file when there is one, else a cloud
+/// sampled on `mesh` (SPEC §1 count rule, `settings.gt_seed`). Returns the points and where
+/// they came from (a path or `sampled(seed=…, count=…)`).
+pub fn ground_truth_points(
+    obj: &ObjectRef,
+    settings: &AnnotateSettings,
+    mesh: &objview_geom::Mesh,
+    transform: Transform,
+) -> Result<(Vec<[f64; 3]>, String), DatasetError> {
+    Ok(match gt_cloud_path(obj, settings.gt_cloud_dir.as_deref())? {
+        Some(p) => {
+            let mut pts = read_cloud(&p)?;
+            if transform != Transform::IDENTITY {
+                pts.iter_mut().for_each(|q| *q = transform.apply(*q));
+            }
+            (pts, p.display().to_string())
+        }
+        None => {
+            let n = cloud_count(mesh.surface_area());
+            let pts = sample_surface(mesh, n, settings.gt_seed);
+            (pts, format!("sampled(seed={}, count={n})", settings.gt_seed))
+        }
+    })
+}
+
 /// Annotates one object (see the module docs). `settings` must be valid; `views` comes from
 /// [`GridViews::new`] with `settings.view_radius`. Per-view work runs on the current rayon pool.
 pub fn annotate_object(
@@ -317,20 +343,7 @@ pub fn annotate_object(
     timings.load = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let (points, gt_source) = match gt_cloud_path(obj, settings.gt_cloud_dir.as_deref())? {
-        Some(p) => {
-            let mut pts = read_cloud(&p)?;
-            if transform != Transform::IDENTITY {
-                pts.iter_mut().for_each(|q| *q = transform.apply(*q));
-            }
-            (pts, p.display().to_string())
-        }
-        None => {
-            let n = cloud_count(mesh.surface_area());
-            let pts = sample_surface(&mesh, n, settings.gt_seed);
-            (pts, format!("sampled(seed={}, count={n})", settings.gt_seed))
-        }
-    };
+    let (points, gt_source) = ground_truth_points(obj, settings, &mesh, transform)?;
     timings.ground_truth = t.elapsed().as_secs_f64();
 
     let t = Instant::now();

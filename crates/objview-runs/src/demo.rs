@@ -11,7 +11,8 @@
 //!    checkpoints of one run, which stops once K = 5, K = 30 and every MS@δ exist: the demo's
 //!    checkpoint list is the paper's 5, 30) in `whole` and `quarter`, and the ground-truth
 //!    oracle over tammes-128 on Main-Hidden-Test and Slow-Saturation (the slow-saturation
-//!    table), into `episodes/*.jsonl` (resumable);
+//!    table), and every learned or hybrid planner the registry holds (`nbv-net` with its shipped
+//!    weights, automatic budget), into `episodes/*.jsonl` (resumable);
 //! 5. write the report (the paper's Tables 2–5, CSVs, figures) into `report/`.
 //!
 //! What it tells the user goes through `say` (one call per line or block of lines), batch
@@ -22,7 +23,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use objview_dataset::{ObjectRef, Progress, Silent};
-use objview_episode::Budget;
+use objview_episode::{Budget, ExecutionMode, Family};
 use objview_geom::normalize::{load_normalized, Normalization};
 use objview_geom::pose::VIEW_RADIUS;
 use objview_pool::split::SplitSettings;
@@ -77,6 +78,25 @@ pub const DEMO_RUNS: [(&str, Budget); 4] = [
     ("rse", Budget::Auto),
     ("rse-mov", Budget::Auto),
 ];
+
+/// The episode stage's runs: [`DEMO_RUNS`], then every learned and hybrid planner of
+/// `planners` (iterative ones once with the automatic budget — K = 5 and K = 30 are
+/// checkpoints of that run — budgeted plans at K = 5 and K = 30), in registry order.
+pub fn demo_runs(planners: &Registry) -> Vec<(&'static str, Budget)> {
+    let mut runs = DEMO_RUNS.to_vec();
+    for e in planners.entries() {
+        if matches!(e.family, Family::Learned | Family::Hybrid) {
+            match e.mode {
+                ExecutionMode::BudgetedPlan => {
+                    runs.push((e.name, Budget::Fixed(5)));
+                    runs.push((e.name, Budget::Fixed(30)));
+                }
+                _ => runs.push((e.name, Budget::Auto)),
+            }
+        }
+    }
+    runs
+}
 
 struct Row {
     name: String,
@@ -270,8 +290,9 @@ impl DemoPlan {
             episodes.display()
         ));
         let mut files = Vec::new();
+        let runs = demo_runs(planners);
         for space in ["whole", "quarter"] {
-            for (planner, budget) in DEMO_RUNS {
+            for &(planner, budget) in &runs {
                 let plan =
                     self.episode_plan(&episodes, planner, space, budget, test_objects.clone(), None)?;
                 files.push(self.demo_run(&plan, planners, say)?);

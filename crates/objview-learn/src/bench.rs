@@ -1,0 +1,115 @@
+//! The benchmark procedures of `objview learn bench` (the CLI prints them): dataset generation
+//! per object, training throughput (samples/s at 32³ and 64³, on 1 and 2 threads) and the
+//! planner's cost per step (grid update + network) at 32³ and 64³.
+//!
+//! Objects are built-in procedural objects at a chosen triangle count, written to a temporary
+//! folder, so the figures are reproducible on any machine.
+
+use std::time::Instant;
+
+use burn::module::Module;
+use burn::nn::loss::CrossEntropyLossConfig;
+use burn::optim::{AdamConfig, GradientsParams};
+use burn::tensor::{Device, Int, Tensor, TensorData};
+use objview_dataset::annotate::GridViews;
+use objview_dataset::ObjectRef;
+use objview_render::{render, Camera};
+use objview_runs::bench::Spread;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::dataset::{generate_object, DatasetSettings, ObjectRecord};
+use crate::input_grid::{InputGrid, GRID};
+use crate::nbvnet::NbvNet;
+use crate::planner::{NetScorer, ViewScorer};
+use crate::LearnError;
+
+fn write_object(name: &str, triangles: usize, dir: &std::path::Path) -> Result<ObjectRef, LearnError> {
+    let mesh = objview_geom::synth::build_with_triangles(name, triangles);
+    let path = dir.join(format!("{name}.obj"));
+    objview_geom::write::write_obj(&path, &mesh).map_err(|e| LearnError::io(&path, e))?;
+    Ok(ObjectRef::from_mesh(&path))
+}
+
+/// Generates the dataset cases of built-in `name` (at about `triangles` triangles) `repeats`
+/// times; returns every run's record (seconds per stage, cases).
+pub fn dataset_per_object(
+    name: &str,
+    triangles: usize,
+    settings: &DatasetSettings,
+    repeats: usize,
+) -> Result<Vec<ObjectRecord>, LearnError> {
+    let dir = tempfile::tempdir().map_err(|e| LearnError::io(std::path::Path::new("tmp"), e))?;
+    let obj = write_object(name, triangles, dir.path())?;
+    let cameras = GridViews::new(settings.annotate.view_radius)?.planning().to_vec();
+    (0..repeats)
+        .map(|_| generate_object(&obj, settings, &cameras, dir.path(), &serde_json::Value::Null))
+        .collect()
+}
+
+/// Training samples per second at grid `grid` with batch `batch` over `batches` timed batches
+/// (after one warm-up batch), on random grids; the spread is of per-batch samples/s.
+pub fn training_throughput(grid: usize, batch: usize, batches: usize) -> Spread {
+    let base = Device::flex();
+    base.seed(1);
+    let device = base.autodiff();
+    let mut net = NbvNet::new(grid, &device);
+    let mut optim = AdamConfig::new().with_epsilon(1e-8).init();
+    let ce = CrossEntropyLossConfig::new().init(&device);
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let mut rates = Vec::new();
+    for i in 0..=batches {
+        let x: Vec<f32> = (0..batch * grid.pow(3)).map(|_| rng.gen_range(0.1..0.97)).collect();
+        let y: Vec<i64> = (0..batch).map(|_| rng.gen_range(0..128)).collect();
+        let t = Instant::now();
+        let x = Tensor::<5>::from_data(TensorData::new(x, [batch, 1, grid, grid, grid]), &device);
+        let y = Tensor::<1, Int>::from_data(TensorData::new(y, [batch]), &device);
+        let loss = ce.forward(net.forward(x), y);
+        let grads = GradientsParams::from_grads(loss.backward(), &net);
+        net = optim.step(4e-4, net, grads);
+        if i > 0 {
+            rates.push(batch as f64 / t.elapsed().as_secs_f64());
+        }
+    }
+    let _ = net.valid();
+    Spread::of(rates)
+}
+
+/// Seconds per planner step (insert the frame into the 64³ grid, pool, network forward) with
+/// a randomly initialized `grid`³ NBV-Net, over the tammes-128 frames of built-in `name`;
+/// returns (grid update, network, total) spreads.
+pub fn inference_per_step(
+    name: &str,
+    triangles: usize,
+    grid: usize,
+    steps: usize,
+) -> Result<[Spread; 3], LearnError> {
+    let mesh = objview_geom::synth::build_with_triangles(name, triangles);
+    let cameras: Vec<Camera> = GridViews::new(objview_geom::pose::VIEW_RADIUS)?.planning().to_vec();
+    let frames: Vec<(Camera, Vec<f32>)> =
+        cameras.iter().take(steps.max(1)).map(|c| (*c, render(&mesh, c).depth)).collect();
+    let device = Device::flex();
+    device.seed(2);
+    let net = NbvNet::new(grid, &device);
+    let dir = tempfile::tempdir().map_err(|e| LearnError::io(std::path::Path::new("tmp"), e))?;
+    let w = dir.path().join("w.safetensors");
+    crate::train::save_weights(&net, &w)?;
+    std::fs::write(dir.path().join("w.json"), format!("{{\"settings\": {{\"grid\": {grid}}}}}"))
+        .map_err(|e| LearnError::io(dir.path(), e))?;
+    let mut scorer = NetScorer::from_file(&w).map_err(LearnError::Invalid)?;
+    let mut g = InputGrid::new(GRID);
+    let (mut a, mut b, mut c) = (vec![], vec![], vec![]);
+    for (cam, depth) in &frames {
+        let t = Instant::now();
+        g.insert_depth(cam, depth);
+        let t1 = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let s = scorer.scores(&g);
+        let t2 = t.elapsed().as_secs_f64();
+        assert_eq!(s.len(), 128);
+        a.push(t1);
+        b.push(t2);
+        c.push(t1 + t2);
+    }
+    Ok([Spread::of(a), Spread::of(b), Spread::of(c)])
+}

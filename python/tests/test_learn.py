@@ -291,8 +291,8 @@ def test_files_and_objects_select(dataset):
         CaseDataset(root, files=["cases/teapot.npz"])
 
 
-def test_lru_cache_loads_each_object_once(dataset, monkeypatch):
-    root, _ = dataset
+def count_loads(monkeypatch) -> list[str]:
+    """Records the file name of every ``learn.load_object`` call (the list grows as it runs)."""
     loads: list[str] = []
     real = learn.load_object
 
@@ -301,6 +301,12 @@ def test_lru_cache_loads_each_object_once(dataset, monkeypatch):
         return real(path, **kw)
 
     monkeypatch.setattr(learn, "load_object", counting)
+    return loads
+
+
+def test_lru_cache_loads_each_object_once(dataset, monkeypatch):
+    root, _ = dataset
+    loads = count_loads(monkeypatch)
     ds = CaseDataset(root, cache_size=2)
     for i in range(len(ds)):
         ds[i]
@@ -427,14 +433,7 @@ def test_iter_batches_shuffle_is_deterministic_and_complete(tmp_path, window):
 def test_shuffled_epoch_loads_each_object_once(tmp_path, monkeypatch):
     root = tmp_path / "ds"
     write_dataset(root, {f"obj{i}": 4 for i in range(9)}, g=2)
-    loads: list[str] = []
-    real = learn.load_object
-
-    def counting(path, **kw):
-        loads.append(Path(path).name)
-        return real(path, **kw)
-
-    monkeypatch.setattr(learn, "load_object", counting)
+    loads = count_loads(monkeypatch)
     ds = CaseDataset(root, cache_size=3)
     every = sorted(f"obj{i}.npz" for i in range(9))
     for seed in range(3):

@@ -7,7 +7,7 @@ use std::sync::{Arc, OnceLock};
 
 use anyhow::{bail, Context, Result};
 use clap::Parser;
-use objview_dataset::resolve_inputs;
+use objview_dataset::{resolve_inputs, Shard};
 use objview_episode::{Budget, EpisodeSettings};
 use objview_geom::normalize::Normalization;
 use objview_geom::Pose;
@@ -82,6 +82,11 @@ pub struct Args {
     /// Redo objects whose earlier line is a failure.
     #[arg(long)]
     pub retry_failed: bool,
+    /// Run only the I-th of N parts of the objects (0 <= I < N), by the same hash of the uid as
+    /// `annotate --shard`; each shard writes its own --out, and `cat` of the shard files is
+    /// the whole run (lines are independent of the shard). Local runs only.
+    #[arg(long)]
+    pub shard: Option<Shard>,
     /// Do not print per-episode lines.
     #[arg(long)]
     pub quiet: bool,
@@ -156,7 +161,7 @@ pub fn plan(a: &Args) -> Result<EpisodePlan> {
         space,
         space_name,
         budget,
-        objects: resolve_inputs(&a.objects)?,
+        objects: a.shard.unwrap_or(Shard::ALL).select(resolve_inputs(&a.objects)?),
         out: a.out.clone(),
         candidates_name: a.candidates.clone(),
         candidates: Arc::new(cands.poses(settings.view_radius)),
@@ -177,6 +182,9 @@ pub fn execute(a: &Args) -> Result<RunSummary> {
     let Some(url) = &a.server else {
         return Ok(plan(a)?.run(registry(), &progress)?);
     };
+    if a.shard.is_some() {
+        bail!("--shard splits local runs; with --server, give each process its own objects (SPLIT:ID,ID,…)");
+    }
     let server_side = [
         ("--start-pose", a.start_pose.is_some()),
         ("--cap", a.cap != 129),

@@ -321,3 +321,95 @@ fn start_poses_beyond_the_bound_are_refused_and_blind_ones_fail_their_objects() 
     assert_eq!(v.len(), 1);
     assert!(v[0]["error"].as_str().unwrap().contains("sees nothing of object cube"), "{}", v[0]);
 }
+
+/// `run --shard I/N` through the Slurm script, as array tasks run it: the shards partition the
+/// objects by the uid hash of `annotate --shard`, their files concatenated hold exactly the
+/// lines of the unsharded run, and `report` takes the concatenation.
+#[test]
+fn sharded_runs_merge_by_cat_into_the_whole_run() {
+    let dir = tempdir();
+    let objs = dir.path().join("objects");
+    objview_ok(&["objects", "synth", "--out", s(&objs)]);
+    let picked: Vec<String> = ["cube", "cone", "sphere", "octahedron"]
+        .iter()
+        .map(|n| s(&objs.join(format!("{n}.obj"))).to_string())
+        .collect();
+    let cache = dir.path().join("cache");
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scripts/run.sbatch");
+    let shards = dir.path().join("shards");
+    // The script takes one --objects input: a split file of the four objects.
+    let split = dir.path().join("four.json");
+    let entries: Vec<Value> = picked
+        .iter()
+        .map(|p| serde_json::json!({"uid": std::path::Path::new(p).file_stem().unwrap().to_str().unwrap(), "mesh": p}))
+        .collect();
+    std::fs::write(&split, serde_json::to_string(&entries).unwrap()).unwrap();
+    for i in 0..3 {
+        let st = std::process::Command::new("bash")
+            .args([
+                script,
+                s(&split),
+                s(&shards),
+                "random-tsp",
+                "whole",
+                "5",
+                "--cache-dir",
+                s(&cache),
+                "--no-timings",
+            ])
+            .env("SLURM_ARRAY_TASK_ID", i.to_string())
+            .env("SLURM_ARRAY_TASK_COUNT", "3")
+            .env("SLURM_CPUS_PER_TASK", "1")
+            .env("OBJVIEW", env!("CARGO_BIN_EXE_objview"))
+            .status()
+            .unwrap();
+        assert!(st.success());
+    }
+    let mut merged = String::new();
+    for i in 0..3 {
+        merged +=
+            &std::fs::read_to_string(shards.join(format!("random-tsp_whole_5.shard-{i}.jsonl"))).unwrap();
+    }
+    let cat = dir.path().join("cat.jsonl");
+    std::fs::write(&cat, &merged).unwrap();
+    let whole = dir.path().join("whole.jsonl");
+    objview_ok(&[
+        "run",
+        "--planner",
+        "random-tsp",
+        "--budget",
+        "5",
+        "--objects",
+        s(&split),
+        "--out",
+        s(&whole),
+        "--cache-dir",
+        s(&cache),
+        "--no-timings",
+        "--quiet",
+    ]);
+    let sorted = |text: &str| -> Vec<String> {
+        let mut v: Vec<String> = text.lines().map(String::from).collect();
+        v.sort();
+        v
+    };
+    assert_eq!(sorted(&merged), sorted(&std::fs::read_to_string(&whole).unwrap()), "byte-identical lines");
+    assert_eq!(merged.lines().count(), 4);
+    let report = dir.path().join("report");
+    objview_ok(&["report", s(&cat), "--out", s(&report), "--no-plots"]);
+    assert!(std::fs::read_to_string(report.join("report.md")).unwrap().contains("random-tsp"));
+    let err = objview_err(&[
+        "run",
+        "--planner",
+        "random",
+        "--objects",
+        "x",
+        "--out",
+        "y.jsonl",
+        "--server",
+        "http://127.0.0.1:9",
+        "--shard",
+        "0/2",
+    ]);
+    assert!(err.contains("--shard"), "{err}");
+}

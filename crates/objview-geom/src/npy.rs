@@ -91,8 +91,22 @@ fn dict_value<'h>(header: &'h str, key: &str) -> Option<&'h str> {
     Some(rest[..end].trim())
 }
 
-/// Parses `.npy` bytes (see [`read_npy_f64`]); `path` names the source in errors.
-pub fn parse_npy_f64(path: &Path, bytes: &[u8]) -> Result<(Vec<usize>, Vec<f64>), GeomError> {
+/// A checked `.npy` header: the dtype descriptor (quotes removed, e.g. `<f4`), the shape (C
+/// order; empty for a 0-d array) and the offset of the data.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NpyHeader {
+    /// The `descr` value, e.g. `<f4`, `|u1`.
+    pub descr: String,
+    /// The shape.
+    pub shape: Vec<usize>,
+    /// Where the data starts in the bytes.
+    pub data_offset: usize,
+}
+
+/// Parses the header of `.npy` bytes (format versions 1.0, 2.0 and 3.0): magic, version,
+/// length, `descr`, `fortran_order` (only `False` is accepted) and `shape`. Errors name `path`
+/// (`invalid NPY: …`). The dtype and the data are the caller's to check.
+pub fn parse_npy_header(path: &Path, bytes: &[u8]) -> Result<NpyHeader, GeomError> {
     let bad = |why: String| GeomError::parse(path, format!("invalid NPY: {why}"));
     if bytes.len() < 10 || &bytes[..6] != MAGIC {
         return Err(bad("missing \\x93NUMPY magic".into()));
@@ -109,12 +123,7 @@ pub fn parse_npy_f64(path: &Path, bytes: &[u8]) -> Result<(Vec<usize>, Vec<f64>)
     };
     let header = std::str::from_utf8(hbytes).map_err(|_| bad("header is not text".into()))?;
     let descr = dict_value(header, "descr").ok_or_else(|| bad("header has no 'descr'".into()))?;
-    let descr = descr.trim_matches(|c| c == '\'' || c == '"');
-    let width = match descr {
-        "<f4" => 4,
-        "<f8" => 8,
-        other => return Err(bad(format!("dtype '{other}' unsupported (little-endian float32/float64 are)"))),
-    };
+    let descr = descr.trim_matches(|c| c == '\'' || c == '"').to_string();
     match dict_value(header, "fortran_order") {
         Some("False") => {}
         Some("True") => return Err(bad("Fortran-order arrays are unsupported".into())),
@@ -131,11 +140,23 @@ pub fn parse_npy_f64(path: &Path, bytes: &[u8]) -> Result<(Vec<usize>, Vec<f64>)
         .filter(|s| !s.is_empty())
         .map(|s| s.parse::<usize>().map_err(|_| bad(format!("bad shape '{shape_s}'"))))
         .collect::<Result<_, _>>()?;
+    Ok(NpyHeader { descr, shape, data_offset: hstart + hlen })
+}
+
+/// Parses `.npy` bytes (see [`read_npy_f64`]); `path` names the source in errors.
+pub fn parse_npy_f64(path: &Path, bytes: &[u8]) -> Result<(Vec<usize>, Vec<f64>), GeomError> {
+    let bad = |why: String| GeomError::parse(path, format!("invalid NPY: {why}"));
+    let NpyHeader { descr, shape, data_offset } = parse_npy_header(path, bytes)?;
+    let width = match descr.as_str() {
+        "<f4" => 4,
+        "<f8" => 8,
+        other => return Err(bad(format!("dtype '{other}' unsupported (little-endian float32/float64 are)"))),
+    };
     let n = shape
         .iter()
         .try_fold(1usize, |a, &d| a.checked_mul(d))
         .ok_or_else(|| bad("shape overflows".into()))?;
-    let data = &bytes[hstart + hlen..];
+    let data = &bytes[data_offset..];
     if data.len() / width < n {
         return Err(bad(format!(
             "shape {shape:?} needs {} data bytes, file has {} (truncated)",

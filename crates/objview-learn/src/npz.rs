@@ -10,6 +10,7 @@ use std::fs::File;
 use std::io::{BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 
+use objview_geom::npy::{npy_header, parse_npy_header};
 use zip::write::SimpleFileOptions;
 use zip::{CompressionMethod, DateTime, ZipArchive, ZipWriter};
 
@@ -82,23 +83,6 @@ impl Dtype {
     }
 }
 
-/// The `.npy` 1.0 header of an array (magic, version, length, dict, padding to 64 bytes).
-pub fn npy_header(dtype: Dtype, shape: &[usize]) -> Vec<u8> {
-    let dims = match shape.len() {
-        0 => "()".to_string(),
-        1 => format!("({},)", shape[0]),
-        _ => format!("({})", shape.iter().map(|d| d.to_string()).collect::<Vec<_>>().join(", ")),
-    };
-    let mut dict = format!("{{'descr': '{}', 'fortran_order': False, 'shape': {dims}, }}", dtype.descr());
-    let unpadded = 10 + dict.len() + 1;
-    dict.push_str(&" ".repeat((64 - unpadded % 64) % 64));
-    dict.push('\n');
-    let mut out = b"\x93NUMPY\x01\x00".to_vec();
-    out.extend_from_slice(&(dict.len() as u16).to_le_bytes());
-    out.extend_from_slice(dict.as_bytes());
-    out
-}
-
 /// Writes an `.npz` file array by array. An array's data may be streamed in pieces after
 /// [`NpzWriter::begin`]; the caller writes exactly `product(shape) · dtype.size()` bytes.
 pub struct NpzWriter {
@@ -121,7 +105,7 @@ impl NpzWriter {
             .last_modified_time(DateTime::default())
             .large_file(shape.iter().product::<usize>() * dtype.size() >= u32::MAX as usize / 2);
         self.zip.start_file(format!("{name}.npy"), opts).map_err(|e| io(&self.path, e))?;
-        self.zip.write_all(&npy_header(dtype, shape)).map_err(|e| io(&self.path, e))
+        self.zip.write_all(&npy_header(dtype.descr(), shape)).map_err(|e| io(&self.path, e))
     }
 
     /// Appends raw little-endian element bytes to the current array.
@@ -169,6 +153,10 @@ impl NpzWriter {
         let w = self.zip.finish().map_err(|e| io(&path, e))?;
         w.into_inner().map_err(|e| io(&path, e.error()))?.sync_all().map_err(|e| io(&path, e))
     }
+}
+
+fn one_line_of(e: &impl std::fmt::Display) -> String {
+    objview_geom::error::one_line(&e.to_string()).into_owned()
 }
 
 fn io(path: &Path, e: impl std::fmt::Display) -> NpzError {
@@ -232,13 +220,17 @@ impl NpzReader {
     pub fn array(&mut self, name: &str, want: Option<Dtype>) -> Result<Array, NpzError> {
         let path = self.path.clone();
         let bad = |reason: String| NpzError::Array { path: path.clone(), name: name.to_string(), reason };
-        let mut entry = self.zip.by_name(&format!("{name}.npy")).map_err(|_| bad("missing".into()))?;
+        let member = format!("{name}.npy");
+        let mut entry = self.zip.by_name(&member).map_err(|_| bad("missing".into()))?;
         if entry.size() > MAX_ARRAY_BYTES {
             return Err(bad(format!("{} bytes is over the limit of {MAX_ARRAY_BYTES}", entry.size())));
         }
         let mut bytes = Vec::with_capacity(entry.size() as usize);
         entry.read_to_end(&mut bytes).map_err(|e| bad(format!("unreadable: {e}")))?;
-        let (dtype, shape, offset) = parse_header(&bytes).map_err(bad)?;
+        let header = parse_npy_header(Path::new(&member), &bytes).map_err(|e| bad(one_line_of(&e)))?;
+        let dtype =
+            Dtype::parse(&header.descr).ok_or_else(|| bad(format!("unsupported dtype {}", header.descr)))?;
+        let (shape, offset) = (header.shape, header.data_offset);
         if let Some(w) = want {
             if w != dtype {
                 return Err(bad(format!("dtype {} where {} is needed", dtype.descr(), w.descr())));
@@ -260,50 +252,18 @@ impl NpzReader {
     }
 }
 
-fn parse_header(b: &[u8]) -> Result<(Dtype, Vec<usize>, usize), String> {
-    if b.len() < 10 || &b[..6] != b"\x93NUMPY" {
-        return Err("not an .npy array".into());
-    }
-    let (hlen, start): (usize, usize) = match b[6] {
-        1 => (u16::from_le_bytes([b[8], b[9]]) as usize, 10),
-        2 | 3 if b.len() >= 12 => (u32::from_le_bytes([b[8], b[9], b[10], b[11]]) as usize, 12),
-        v => return Err(format!("unsupported .npy version {v}")),
-    };
-    let end = start.checked_add(hlen).filter(|&e| e <= b.len()).ok_or("truncated header")?;
-    let h = std::str::from_utf8(&b[start..end]).map_err(|_| "header is not text")?;
-    let field = |key: &str| -> Result<&str, String> {
-        let i = h.find(&format!("'{key}'")).ok_or(format!("header has no '{key}'"))?;
-        Ok(h[i + key.len() + 2..].trim_start().trim_start_matches(':').trim_start())
-    };
-    let descr = field("descr")?;
-    let descr = descr.strip_prefix('\'').and_then(|d| d.split('\'').next()).ok_or("bad descr")?;
-    let dtype = Dtype::parse(descr).ok_or(format!("unsupported dtype {descr}"))?;
-    if field("fortran_order")?.starts_with("True") {
-        return Err("Fortran order is not supported".into());
-    }
-    let shape_text = field("shape")?;
-    let shape_text = shape_text.strip_prefix('(').and_then(|s| s.split(')').next()).ok_or("bad shape")?;
-    let shape = shape_text
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| s.parse::<usize>().map_err(|_| format!("bad shape dimension {s:?}")))
-        .collect::<Result<Vec<_>, _>>()?;
-    Ok((dtype, shape, end))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
-    fn headers_are_aligned_and_parse_back() {
-        for shape in [vec![], vec![3], vec![2, 64, 64, 64]] {
-            let h = npy_header(Dtype::F32, &shape);
+    fn headers_of_every_dtype_parse_back() {
+        for (dtype, shape) in [(Dtype::F32, vec![]), (Dtype::U8, vec![3]), (Dtype::I64, vec![2, 64, 64, 64])]
+        {
+            let h = npy_header(dtype.descr(), &shape);
             assert_eq!(h.len() % 64, 0);
-            assert_eq!(*h.last().unwrap(), b'\n');
-            let (d, s, off) = parse_header(&h).unwrap();
-            assert_eq!((d, s, off), (Dtype::F32, shape, h.len()));
+            let p = parse_npy_header(Path::new("x.npy"), &h).unwrap();
+            assert_eq!((Dtype::parse(&p.descr), p.shape, p.data_offset), (Some(dtype), shape, h.len()));
         }
     }
 

@@ -103,24 +103,32 @@ fn every_object_is_valid_normalized_and_non_degenerate() {
         m.validate(Path::new(o.name)).unwrap();
         let n = m.num_triangles();
         assert!((2_000..=20_000).contains(&n), "{}: {n} triangles at default detail", o.name);
-        assert!((m.max_radius() - 1.0).abs() <= 1e-12, "{}: max radius {}", o.name, m.max_radius());
-        let (lo, hi) = m.bounds().unwrap();
-        for k in 0..3 {
-            assert!((lo[k] + hi[k]).abs() <= 1e-12, "{}: AABB centre off on axis {k}", o.name);
+        check_normalized_clean(o.name, &m);
+        if let Appearance::FaceColors(c) = &m.appearance {
+            assert!(c.iter().flatten().all(|x| (0.0..=1.0).contains(x)));
         }
-        let min_area = (0..n).map(|t| m.triangle_area(t)).fold(f64::INFINITY, f64::min);
-        assert!(min_area > 1e-12, "{}: degenerate triangle, area {min_area}", o.name);
-        // Every vertex is used (no stray points that would disturb bounds-based consumers).
-        let mut used = vec![false; m.positions.len()];
-        m.triangles.iter().flatten().for_each(|&i| used[i as usize] = true);
-        assert!(used.iter().all(|&u| u), "{}: unreferenced vertex", o.name);
-        match &m.appearance {
-            Appearance::FaceColors(c) => {
-                assert_eq!(c.len(), n, "{}", o.name);
-                assert!(c.iter().flatten().all(|x| (0.0..=1.0).contains(x)));
-            }
-            other => panic!("{}: expected face colours, got {other:?}", o.name),
-        }
+    }
+}
+
+/// A generated object's mesh is normalized (max radius 1, AABB centred), has no degenerate
+/// triangle and no unreferenced vertex, and carries one colour per face. Shared by the tests of
+/// the built-in and the random pools.
+pub(super) fn check_normalized_clean(name: &str, m: &Mesh) {
+    let n = m.num_triangles();
+    assert!((m.max_radius() - 1.0).abs() <= 1e-12, "{name}: max radius {}", m.max_radius());
+    let (lo, hi) = m.bounds().unwrap();
+    for k in 0..3 {
+        assert!((lo[k] + hi[k]).abs() <= 1e-12, "{name}: AABB centre off on axis {k}");
+    }
+    let min_area = (0..n).map(|t| m.triangle_area(t)).fold(f64::INFINITY, f64::min);
+    assert!(min_area > 1e-12, "{name}: degenerate triangle, area {min_area}");
+    // Every vertex is used (no stray points that would disturb bounds-based consumers).
+    let mut used = vec![false; m.positions.len()];
+    m.triangles.iter().flatten().for_each(|&i| used[i as usize] = true);
+    assert!(used.iter().all(|&u| u), "{name}: unreferenced vertex");
+    match &m.appearance {
+        Appearance::FaceColors(c) => assert_eq!(c.len(), n, "{name}"),
+        other => panic!("{name}: expected face colours, got {other:?}"),
     }
 }
 

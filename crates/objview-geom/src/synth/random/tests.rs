@@ -4,7 +4,7 @@
 
 use super::*;
 use crate::hash::Fnv;
-use crate::synth::tests::{check_closed, signed_volume};
+use crate::synth::tests::{check_closed, check_normalized_clean, signed_volume};
 use std::collections::{BTreeMap, HashSet};
 
 fn mesh_hash(m: &Mesh) -> u64 {
@@ -29,20 +29,7 @@ fn check_object(o: &RandomObject) {
     assert!(v > 0.0 && v < 4.0 / 3.0 * std::f64::consts::PI, "{}: signed volume {v}", o.name);
     let n = m.num_triangles();
     assert!((MIN_TRIANGLES..=MAX_TRIANGLES).contains(&n), "{}: {n} triangles", o.name);
-    assert!((m.max_radius() - 1.0).abs() <= 1e-12, "{}: max radius {}", o.name, m.max_radius());
-    let (lo, hi) = m.bounds().unwrap();
-    for k in 0..3 {
-        assert!((lo[k] + hi[k]).abs() <= 1e-12, "{}: AABB centre off on axis {k}", o.name);
-    }
-    let min_area = (0..n).map(|t| m.triangle_area(t)).fold(f64::INFINITY, f64::min);
-    assert!(min_area > 1e-12, "{}: degenerate triangle, area {min_area}", o.name);
-    let mut used = vec![false; m.positions.len()];
-    m.triangles.iter().flatten().for_each(|&i| used[i as usize] = true);
-    assert!(used.iter().all(|&u| u), "{}: unreferenced vertex", o.name);
-    match &m.appearance {
-        crate::Appearance::FaceColors(c) => assert_eq!(c.len(), n),
-        other => panic!("{}: expected face colours, got {other:?}", o.name),
-    }
+    check_normalized_clean(&o.name, m);
     assert!(o.params.is_object());
     assert_eq!(o.name, object_name(o.object_seed_pool(), o.index, o.family));
 }

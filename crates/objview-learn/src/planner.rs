@@ -34,7 +34,7 @@ use serde_json::{json, Value};
 
 use crate::input_grid::{pool_grid, InputGrid, GRID};
 use crate::nbvnet::{NbvNet, CLASSES};
-use crate::train::{argmax_rows, load_weights_bytes};
+use crate::train::{argmax, load_weights_bytes};
 
 /// The shipped NBV-Net weights (safetensors) and their sidecar.
 pub const BUILTIN_WEIGHTS: &[u8] = include_bytes!("../../../data/weights/nbv-net.safetensors");
@@ -146,10 +146,7 @@ pub fn decide(
     feasible: &[bool],
     current_is: Option<usize>,
 ) -> Result<usize, StopReason> {
-    let best = argmax_rows(Tensor::<2>::from_data(
-        TensorData::new(scores.to_vec(), [1, scores.len()]),
-        &Device::flex(),
-    ))[0];
+    let best = argmax(scores);
     if best >= CLASSES || best >= feasible.len() {
         return Err(StopReason::NextViewInfeasible);
     }

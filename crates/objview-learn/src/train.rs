@@ -326,22 +326,22 @@ pub fn predict(net: &NbvNet, cases: &Cases, idx: &[usize], device: &Device) -> V
     argmax_rows(net.forward(x))
 }
 
-/// Row-wise argmax of logits [B, C], ties to the lowest index.
+/// The index of the largest score, ties to the lowest index (0 for an empty slice).
+pub fn argmax(scores: &[f32]) -> usize {
+    let mut best = 0;
+    for (j, &x) in scores.iter().enumerate() {
+        if x > scores[best] {
+            best = j;
+        }
+    }
+    best
+}
+
+/// Row-wise [`argmax`] of logits [B, C].
 pub fn argmax_rows(logits: Tensor<2>) -> Vec<usize> {
-    let [b, c] = logits.dims();
+    let [_, c] = logits.dims();
     let v: Vec<f32> = logits.into_data().try_to_vec::<f32>().expect("f32 logits");
-    (0..b)
-        .map(|r| {
-            let row = &v[r * c..(r + 1) * c];
-            let mut best = 0;
-            for (j, &x) in row.iter().enumerate() {
-                if x > row[best] {
-                    best = j;
-                }
-            }
-            best
-        })
-        .collect()
+    v.chunks(c.max(1)).map(argmax).collect()
 }
 
 /// Mean loss and top-1 agreement of `net` (a non-autodiff model) over `cases`.

@@ -304,7 +304,10 @@ pub fn generate_object(
     let g = settings.grid;
     let mut w = NpzWriter::create(&tmp)?;
     w.begin("grid", Dtype::F32, &[n, g, g, g])?;
+    // Each view's depth frame (or visible voxel centres) is made once and reused by every
+    // rollout that visits it.
     let mut frames: BTreeMap<usize, Vec<f32>> = BTreeMap::new();
+    let mut centres: BTreeMap<usize, Vec<[f64; 3]>> = BTreeMap::new();
     let mut grid = InputGrid::new(g);
     let mut buf = Vec::with_capacity(g * g * g);
     let mut current: Option<(usize, usize)> = None; // (rollout, views inserted)
@@ -324,11 +327,13 @@ pub fn generate_object(
                     grid.insert_depth(&cameras[v], depth);
                 }
                 InputSource::VoxelCentres => {
-                    let pts: Vec<[f64; 3]> = bitset_to_indices(&coverage.sets[v])
-                        .into_iter()
-                        .map(|i| center_of(set.key(i as usize), a.resolution))
-                        .collect();
-                    grid.insert_points(cameras[v].center, &pts);
+                    let pts = centres.entry(v).or_insert_with(|| {
+                        bitset_to_indices(&coverage.sets[v])
+                            .into_iter()
+                            .map(|i| center_of(set.key(i as usize), a.resolution))
+                            .collect()
+                    });
+                    grid.insert_points(cameras[v].center, pts);
                 }
             }
         }

@@ -52,8 +52,9 @@ pub fn bench_episode(a: EpisodeBenchArgs) -> Result<()> {
         1e3 * r.reference_seconds / r.reference_views.max(1) as f64
     );
     println!(
-        "engine step (render + fusion + SC/NSC/CD at 3 τ + MS), {} views, one thread: median {:.1} ms, p90 {:.1} ms, max {:.1} ms; median after the first 5 views {:.1} ms; episode {:.2} s",
+        "engine step (render + fusion + SC/NSC at 3 τ + MS), {} views ({} without a checkpoint), one thread: median {:.2} ms, p90 {:.2} ms, max {:.2} ms; median after the first 5 views {:.2} ms; episode {:.2} s",
         r.engine_step_seconds.len(),
+        r.engine_step_seconds.len() - r.checkpoint_views,
         1e3 * r.engine.median,
         1e3 * r.engine.p90,
         1e3 * r.engine.max,
@@ -61,7 +62,7 @@ pub fn bench_episode(a: EpisodeBenchArgs) -> Result<()> {
         r.engine_episode_seconds
     );
     println!(
-        "engine step, {} threads: median {:.1} ms, p90 {:.1} ms; episode {:.2} s ({:.2}x the one-thread median)",
+        "engine step, {} threads: median {:.2} ms, p90 {:.2} ms; episode {:.2} s ({:.2}x the one-thread median)",
         r.threads,
         1e3 * r.engine_all_threads.median,
         1e3 * r.engine_all_threads.p90,
@@ -69,11 +70,17 @@ pub fn bench_episode(a: EpisodeBenchArgs) -> Result<()> {
         r.all_threads_speedup()
     );
     println!(
-        "  by stage (medians, one thread): render {:.1} ms, fusion {:.1} ms, nearest-fused distances of the GT (SC, CD) and the reference (NSC) {:.1} ms, coverage counts + MS {:.1} ms",
+        "  by stage (medians, one thread): render {:.2} ms, fusion {:.2} ms, SC + NSC coverage {:.2} ms, MS + rest {:.2} ms",
         1e3 * r.stages.render,
         1e3 * r.stages.fusion,
-        1e3 * r.stages.distances,
-        1e3 * r.stages.coverage_ms
+        1e3 * r.stages.coverage,
+        1e3 * r.stages.rest
+    );
+    println!(
+        "  CD at checkpoints (reported separately): {} views with a checkpoint, median {:.1} ms, max {:.1} ms per checkpoint view",
+        r.checkpoint_views,
+        1e3 * r.checkpoint_cd.median,
+        1e3 * r.checkpoint_cd.max
     );
     for p in &r.planners {
         println!(

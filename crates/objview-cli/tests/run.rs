@@ -413,3 +413,64 @@ fn sharded_runs_merge_by_cat_into_the_whole_run() {
     ]);
     assert!(err.contains("--shard"), "{err}");
 }
+
+/// The campaign script, as two array tasks run it over two planners (one iterative, one
+/// budgeted) and both view spaces: every (planner, space, budget) the protocol needs gets one
+/// shard file per task, the shards partition the objects, and `report` takes their
+/// concatenation with the K=5, K=30 and automatic settings.
+#[test]
+fn the_campaign_script_runs_every_setting_per_shard() {
+    let dir = tempdir();
+    let objs = dir.path().join("objects");
+    objview_ok(&["objects", "synth", "--out", s(&objs)]);
+    let entries: Vec<Value> = ["cube", "cone", "sphere"]
+        .iter()
+        .map(|n| serde_json::json!({"uid": n, "mesh": s(&objs.join(format!("{n}.obj")))}))
+        .collect();
+    let split = dir.path().join("three.json");
+    std::fs::write(&split, serde_json::to_string(&entries).unwrap()).unwrap();
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scripts/campaign.sbatch");
+    let out = dir.path().join("campaign");
+    let cache = dir.path().join("cache");
+    for i in 0..2 {
+        let o = std::process::Command::new("bash")
+            .args([script, s(&split), s(&out), "--cache-dir", s(&cache), "--no-timings"])
+            .env("SLURM_ARRAY_TASK_ID", i.to_string())
+            .env("SLURM_ARRAY_TASK_COUNT", "2")
+            .env("SLURM_CPUS_PER_TASK", "1")
+            .env("CAMPAIGN_PLANNERS", "random random-tsp")
+            .env("OBJVIEW", env!("CARGO_BIN_EXE_objview"))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let log = String::from_utf8_lossy(&o.stdout);
+        assert!(log.contains(&format!("campaign: shard {i}/2 done in")), "{log}");
+    }
+    let mut names: Vec<String> =
+        std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    names.sort();
+    let mut want = Vec::new();
+    for (planner, budgets) in [("random", &["auto"][..]), ("random-tsp", &["30", "5"][..])] {
+        for space in ["quarter", "whole"] {
+            for b in budgets {
+                for i in 0..2 {
+                    want.push(format!("{planner}_{space}_{b}.shard-{i}.jsonl"));
+                }
+            }
+        }
+    }
+    want.sort();
+    assert_eq!(names, want);
+    let mut merged = String::new();
+    for n in &names {
+        merged += &std::fs::read_to_string(out.join(n)).unwrap();
+    }
+    // 6 settings × 3 objects, each object in exactly one shard of each setting.
+    assert_eq!(merged.lines().count(), 18);
+    let cat = dir.path().join("cat.jsonl");
+    std::fs::write(&cat, &merged).unwrap();
+    let report = dir.path().join("report");
+    objview_ok(&["report", s(&cat), "--out", s(&report), "--no-plots"]);
+    let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+    assert!(md.contains("random-tsp") && md.contains("K=30") && md.contains("Automatic"), "{md}");
+}

@@ -1,116 +1,84 @@
-//! Nearest-fused-point distances of a fixed point set (the ground-truth cloud for SC@τ and CD,
-//! the observable reference for NSC@τ), kept exact and updated incrementally after each
-//! fusion step. This is where SC, NSC and the GT→fused half of CD come from.
+//! SC@τ and NSC@τ of every step (SPEC §5): how many points of a fixed set (the ground truth for
+//! SC, the observable reference for NSC) have a fused point at d² < τ² *now* — instantaneous
+//! coverage against the current fused cloud, as the reference implementation computes it.
+//! Exact, and bounded: only distances below τ_max matter, so nothing beyond τ_max is searched.
 //!
-//! Each target point keeps d² to its nearest fused point and that point's slot. After an
-//! insertion only slots that were created or moved can change a distance:
-//! - *push*: every changed slot updates the targets in the 27 fine voxels around it; a target
-//!   whose nearest slot moved away is recomputed. This is exact for every target whose
-//!   distance was ≤ h (any point closer than h lies in those 27 voxels).
-//! - *far* targets (distance > h, or none yet): the minimum with the changed slots, found
-//!   block by block with box pruning. When a far target's nearest slot moved, every unchanged
-//!   slot is still at least its previous distance away, so the minimum over the changed slots
-//!   is the answer whenever it is no larger than that; otherwise (and for near targets whose
-//!   slot moved away) a full nearest search runs, bounded by the moved slot's new distance.
+//! Each target keeps its exact nearest-fused d² below τ_max² (∞ otherwise) and that slot.
+//! After an insertion only the changed slots (created or moved) can change a distance, and only
+//! for targets within τ_max of them; the changed slots are grouped by block
+//! ([`ChangedBlocks`]) and each target block with live targets looks at the groups within
+//! τ_max of it:
+//! - nearest slot unchanged: the new distance is min(old, nearest changed slot);
+//! - nearest slot moved: every unchanged slot is still at least the old distance away, so the
+//!   nearest changed slot is the answer when it is no farther than that; otherwise a nearest
+//!   search of the whole cloud, bounded by the nearest changed slot, decides.
 //!
-//! With a cap (NSC needs distances only up to max τ), distances at or above the cap are
-//! stored as +∞ and searches are bounded by it.
+//! *Retirement* keeps the work proportional to the part of the object still being discovered:
+//! a fused point never leaves its voxel, so once an occupied voxel lies entirely within the
+//! smallest τ of a target, that target is covered at every τ for the rest of the episode and
+//! is never looked at again. On observed surfaces that happens at the first view that sees
+//! them (the target's own voxel is within h√3 ≈ 0.0087 < 0.01 of all its points).
 
-use crate::fusion::FusedCloud;
-use crate::grid::{
-    block_of, dist2, local_index, nearest_in, Aabb, Bucketed, Domain, SuperGrid, BLOCK, BLOCK_CELLS, NONE,
-};
+use std::sync::Arc;
+
 use rayon::prelude::*;
 
-/// The immutable spatial index of a target set, shared (behind an `Arc`) by every episode
-/// on the same scene: building it sorts every point, which is most of an episode's set-up.
+use crate::fusion::FusedCloud;
+use crate::grid::{block_box_dist2, block_of, dist2, local_index, ChangedBlocks, Domain, BLOCK, NONE};
+
+/// Safety margin (units²) of the retirement test: a voxel counts as inside the ball only with
+/// this much to spare, so that a centroid rounded an ulp outside its voxel cannot matter.
+const RETIRE_MARGIN2: f64 = 1e-12;
+
+/// The immutable part of a target set, shared by every episode on the same scene.
 #[derive(Debug)]
-struct TargetIndex {
+struct Index {
     domain: Domain,
-    /// Points sorted by (block, fine voxel).
+    /// The points, sorted by (block, fine voxel).
     pts: Vec<[f64; 3]>,
-    /// Domain block → index into `cell_start` (or NONE).
-    table: Vec<u32>,
-    /// Per target block: start offsets of its 512 voxels into `pts` (513 entries).
-    cell_start: Vec<[u32; BLOCK_CELLS + 1]>,
-    /// The target blocks by superblock (far nearest searches).
-    supergrid: SuperGrid,
-    /// Target block of each target.
-    pt_block: Vec<u32>,
+    /// Per target block: its block key and the range of its points.
+    blocks: Vec<([i32; 3], u32, u32)>,
 }
 
-impl TargetIndex {
-    /// Calls `f(target block, first, end)` with the index range of the targets in the fine
-    /// voxels within `r` (per axis) of voxel `k`: runs of consecutive voxels along x within one
-    /// block, which are contiguous in the sorted points.
-    #[inline]
-    fn for_runs_around(&self, k: [i32; 3], r: i32, mut f: impl FnMut(u32, u32, u32)) {
-        for dz in -r..=r {
-            for dy in -r..=r {
-                let mut dx = -r;
-                while dx <= r {
-                    let kk = [k[0] + dx, k[1] + dy, k[2] + dz];
-                    let run_end = (dx + (BLOCK - 1 - (kk[0] & (BLOCK - 1)))).min(r);
-                    let len = (run_end - dx + 1) as usize;
-                    dx = run_end + 1;
-                    let Some(b) = self.domain.block_index(block_of(kk)) else { continue };
-                    let t = self.table[b];
-                    if t == NONE {
-                        continue;
-                    }
-                    let starts = &self.cell_start[t as usize];
-                    let li = local_index(kk);
-                    f(t, starts[li], starts[li + len]);
-                }
-            }
-        }
-    }
+/// One update of a target (see [`Coverage::update`]).
+struct Change {
+    target: u32,
+    d2: f64,
+    nn: u32,
+    retire: bool,
 }
 
-/// Records that target `i`'s distance was written in update `epoch` (once per update): only
-/// such targets can gain coverage (see [`Targets::coverage`]).
-#[inline]
-fn record_touch(tstamp: &mut [u32], touched: &mut Vec<u32>, epoch: u32, i: u32) {
-    if tstamp[i as usize] != epoch {
-        tstamp[i as usize] = epoch;
-        touched.push(i);
-    }
-}
-
-/// A fixed point set with its nearest-fused distances. Cloning a fresh set (before its first
-/// update) is the cheap way to start another episode on the same points: the index is shared.
+/// Instantaneous coverage of a fixed point set at up to 8 radii.
 #[derive(Debug, Clone)]
-pub struct Targets {
-    ix: std::sync::Arc<TargetIndex>,
-    /// Nearest-fused d² (∞: none, or ≥ cap).
-    pub d2: Vec<f64>,
+pub struct Coverage {
+    ix: Arc<Index>,
+    /// τ² in the order of the τ list.
+    t2: Vec<f64>,
+    /// τ_max².
+    r2: f64,
+    /// τ_min² less the margin: the retirement bound.
+    retire2: f64,
+    /// Nearest-fused d² (∞: none below τ_max); frozen (below τ_min²) once retired.
+    d2: Vec<f64>,
     /// Nearest slot, or NONE.
     nn: Vec<u32>,
-    /// Targets with d² > h² at the start of the next update.
-    far: Vec<u32>,
-    cap2: f64,
-    mark: Vec<u32>,
-    epoch: u32,
-    /// Per target: bit j set once d² < τ_j² has held at some update (see [`Targets::coverage`]).
-    ever: Vec<u8>,
-    /// Per τ_j: targets with bit j set.
-    ever_counts: Vec<usize>,
-    /// Targets whose distance was written since the last [`Targets::coverage`] (only they can
-    /// become covered), and the update at which each was last recorded there.
-    touched: Vec<u32>,
-    tstamp: Vec<u32>,
-    /// Retire targets once covered at the smallest τ (coverage-only sets: NSC).
-    retire: bool,
-    /// Retired targets are skipped by every update.
-    retired: Vec<bool>,
-    /// Per target block: targets not retired.
-    live: Vec<u32>,
+    /// Per target block: its live (not retired) targets, ascending.
+    live: Vec<Vec<u32>>,
+    /// Target blocks with live targets, ascending.
+    live_blocks: Vec<u32>,
+    /// Per τ: targets with d² < τ².
+    counts: Vec<usize>,
+    retired: usize,
 }
 
-impl Targets {
-    /// Indexes `points` in `domain` (points outside the domain are an error naming how many).
-    /// `cap`: distances at or above it are only known to be "≥ cap" (∞ for exact distances).
-    pub fn new(domain: Domain, points: &[[f64; 3]], cap: f64) -> Result<Targets, String> {
+impl Coverage {
+    /// The coverage of `points` at each τ of `taus` (1 to 8 positive radii), with nothing fused
+    /// yet. Points outside `domain` are an error naming how many. The result's point order
+    /// ([`Coverage::points`]) is by voxel, the same as [`crate::chamfer::Targets::points`].
+    pub fn new(domain: Domain, points: &[[f64; 3]], taus: &[f64]) -> Result<Coverage, String> {
+        if taus.is_empty() || taus.len() > 8 || taus.iter().any(|t| !(t.is_finite() && *t > 0.0)) {
+            return Err(format!("coverage radii must be 1 to 8 positive numbers, got {taus:?}"));
+        }
         let mut keyed: Vec<(u32, u32, usize)> = Vec::with_capacity(points.len());
         let mut outside = 0usize;
         for (i, &p) in points.iter().enumerate() {
@@ -124,81 +92,36 @@ impl Targets {
             return Err(format!("{outside} target points lie outside the metric domain"));
         }
         keyed.sort_unstable();
-        let mut table = vec![NONE; domain.num_blocks()];
-        let mut cell_start: Vec<[u32; BLOCK_CELLS + 1]> = Vec::new();
-        let mut supergrid = SuperGrid::new(&domain);
-        let mut pts = Vec::with_capacity(keyed.len());
+        let pts: Vec<[f64; 3]> = keyed.iter().map(|&(_, _, i)| points[i]).collect();
+        let mut blocks = Vec::new();
+        let mut live = Vec::new();
         let mut i = 0;
         while i < keyed.len() {
             let b = keyed[i].0;
-            let mut starts = [0u32; BLOCK_CELLS + 1];
             let mut j = i;
-            for (c, start) in starts.iter_mut().enumerate().take(BLOCK_CELLS) {
-                *start = (i + (j - i)) as u32;
-                while j < keyed.len() && keyed[j].0 == b && keyed[j].1 as usize == c {
-                    pts.push(points[keyed[j].2]);
-                    j += 1;
-                }
+            while j < keyed.len() && keyed[j].0 == b {
+                j += 1;
             }
-            starts[BLOCK_CELLS] = j as u32;
-            table[b as usize] = cell_start.len() as u32;
-            cell_start.push(starts);
-            if let Some(h) = supergrid.add_block(domain.block_key(b as usize)) {
-                for &p in &pts[starts[0] as usize..j] {
-                    supergrid.grow(h, p);
-                }
-            }
+            blocks.push((domain.block_key(b as usize), i as u32, j as u32));
+            live.push((i as u32..j as u32).collect());
             i = j;
         }
         let n = pts.len();
-        let mut live = Vec::with_capacity(cell_start.len());
-        let mut pt_block = vec![0u32; n];
-        for (t, st) in cell_start.iter().enumerate() {
-            live.push(st[BLOCK_CELLS] - st[0]);
-            pt_block[st[0] as usize..st[BLOCK_CELLS] as usize].iter_mut().for_each(|b| *b = t as u32);
-        }
-        Ok(Targets {
-            ix: std::sync::Arc::new(TargetIndex { domain, pts, table, cell_start, supergrid, pt_block }),
+        let t2: Vec<f64> = taus.iter().map(|t| t * t).collect();
+        let r2 = t2.iter().cloned().fold(0.0, f64::max);
+        let tmin2 = t2.iter().cloned().fold(f64::INFINITY, f64::min);
+        Ok(Coverage {
+            live_blocks: (0..blocks.len() as u32).collect(),
+            ix: Arc::new(Index { domain, pts, blocks }),
+            counts: vec![0; t2.len()],
+            t2,
+            r2,
+            retire2: tmin2 - RETIRE_MARGIN2,
             d2: vec![f64::INFINITY; n],
             nn: vec![NONE; n],
-            far: (0..n as u32).collect(),
-            cap2: cap * cap,
-            mark: vec![0; n],
-            epoch: 0,
-            ever: vec![0; n],
-            ever_counts: Vec::new(),
-            touched: Vec::new(),
-            tstamp: vec![0; n],
-            retire: false,
-            retired: vec![false; n],
             live,
+            retired: 0,
         })
-    }
-
-    /// Retire targets once they are covered at the smallest τ of [`Targets::coverage`]: they
-    /// are never looked at again, which makes a coverage-only set (NSC's reference) cheaper
-    /// as the episode goes on. Their d² is then stale, and [`Targets::update`]'s returned
-    /// distances ignore them; coverage fractions are unchanged (sticky coverage).
-    pub fn retire_covered(mut self) -> Targets {
-        self.retire = true;
-        self
-    }
-
-    /// Forgets every distance (as before the first update).
-    pub fn reset(&mut self) {
-        self.retired.iter_mut().for_each(|r| *r = false);
-        for (t, st) in self.ix.cell_start.iter().enumerate() {
-            self.live[t] = st[BLOCK_CELLS] - st[0];
-        }
-        self.d2.iter_mut().for_each(|d| *d = f64::INFINITY);
-        self.nn.iter_mut().for_each(|n| *n = NONE);
-        self.far = (0..self.ix.pts.len() as u32).collect();
-        self.ever.iter_mut().for_each(|e| *e = 0);
-        self.ever_counts.clear();
-        self.touched.clear();
-        self.tstamp.iter_mut().for_each(|t| *t = 0);
-        self.epoch = 0;
-        self.mark.iter_mut().for_each(|m| *m = 0);
     }
 
     /// Number of target points.
@@ -211,465 +134,187 @@ impl Targets {
         self.ix.pts.is_empty()
     }
 
-    /// The points (sorted by voxel; the order of [`Targets::d2`]).
+    /// The points (sorted by voxel: the order of [`Coverage::covered`]).
     pub fn points(&self) -> &[[f64; 3]] {
         &self.ix.pts
     }
 
-    /// Number of targets with d² < τ² for each τ.
-    pub fn counts(&self, taus: &[f64]) -> Vec<usize> {
-        let mut counts = vec![0usize; taus.len()];
-        let t2: Vec<f64> = taus.iter().map(|t| t * t).collect();
-        for &d in &self.d2 {
-            for (c, &t) in counts.iter_mut().zip(&t2) {
-                if d < t {
-                    *c += 1;
-                }
-            }
-        }
-        counts
+    /// Targets retired so far (covered at every τ for good).
+    pub fn retired(&self) -> usize {
+        self.retired
     }
 
-    /// Coverage for each τ (at most 8): the fraction of targets that have been within τ of the
-    /// fused cloud at this or an earlier update — *sticky* coverage. A fused point is a voxel
-    /// centroid that drifts (inside its voxel) as views are added, so the instantaneous
-    /// fraction ([`Targets::fractions`]) can drop by a few points out of 10⁵–10⁶ even though
-    /// the accumulated observations still cover them; sticky coverage never decreases within
-    /// an episode. Call once per update, always with the same τ list.
-    pub fn coverage(&mut self, taus: &[f64]) -> Vec<f64> {
-        let t2: Vec<f64> = taus.iter().take(8).map(|t| t * t).collect();
-        if self.ever_counts.len() != t2.len() {
-            self.ever_counts = vec![0; t2.len()];
-        }
-        // The smallest τ: covered there means covered at every τ.
-        let jmin = (0..t2.len()).min_by(|&a, &b| t2[a].total_cmp(&t2[b])).unwrap_or(0);
-        // Only targets whose distance was written since the last call can gain a bit.
-        for i in std::mem::take(&mut self.touched) {
-            let i = i as usize;
-            if self.retired[i] {
-                continue;
-            }
-            let d = self.d2[i];
-            let e = &mut self.ever[i];
-            for (j, &t) in t2.iter().enumerate() {
-                if d < t && *e & (1 << j) == 0 {
-                    *e |= 1 << j;
-                    self.ever_counts[j] += 1;
-                }
-            }
-            if self.retire && *e & (1 << jmin) != 0 {
-                self.retired[i] = true;
-                self.live[self.ix.pt_block[i] as usize] -= 1;
-            }
-        }
-        let n = self.ix.pts.len().max(1) as f64;
-        self.ever_counts.iter().map(|&c| c as f64 / n).collect()
+    /// Per τ of the list: how many targets have a fused point at d² < τ² now.
+    pub fn counts(&self) -> &[usize] {
+        &self.counts
     }
 
-    /// Whether each target has ever been within τ_j (bit j of [`Targets::coverage`]'s list).
-    pub fn ever_covered(&self, j: usize) -> Vec<bool> {
-        self.ever.iter().map(|e| e & (1 << j) != 0).collect()
+    /// Per τ of the list: the covered fraction now (0 for an empty set).
+    pub fn fractions(&self) -> Vec<f64> {
+        let n = self.len().max(1) as f64;
+        self.counts.iter().map(|&c| c as f64 / n).collect()
     }
 
-    /// Instantaneous fraction of targets with d² < τ² for each τ.
-    pub fn fractions(&self, taus: &[f64]) -> Vec<f64> {
-        let n = self.ix.pts.len().max(1) as f64;
-        self.counts(taus).into_iter().map(|c| c as f64 / n).collect()
+    /// Whether each target (in [`Coverage::points`] order) is covered at τ_j now.
+    pub fn covered(&self, j: usize) -> Vec<bool> {
+        let t = self.t2[j];
+        self.d2.iter().map(|&d| d < t).collect()
     }
 
-    /// Mean d² (the GT→fused half of CD); ∞ while no fused point exists.
-    pub fn mean_d2(&self) -> f64 {
-        if self.ix.pts.is_empty() {
-            return 0.0;
+    /// Brings the coverage to `fused` as it is now. `groups` holds the slots created or moved
+    /// by its latest insertion ([`ChangedBlocks::new`] of the delta); the previous update must
+    /// have seen the insertion before (one update per insertion).
+    pub fn update(&mut self, fused: &FusedCloud, groups: &ChangedBlocks) {
+        if groups.blocks.is_empty() || self.live_blocks.is_empty() {
+            return;
         }
-        self.d2.iter().sum::<f64>() / self.ix.pts.len() as f64
-    }
-
-    /// Updates every distance after `fused` changed the slots `changed` (its latest insertion).
-    ///
-    /// Returns, per changed slot, the squared distance to the nearest target (the fused→target
-    /// distance, which the push finds for free within h; a full search otherwise).
-    pub fn update(&mut self, fused: &FusedCloud, changed: &[u32]) -> Vec<f64> {
-        self.epoch += 1;
-        let h2 = self.ix.domain.h * self.ix.domain.h;
-        let mut recompute: Vec<u32> = Vec::new();
-        // Far targets whose nearest slot moved: full search (checked before the push, which
-        // may point them at slots that changed now).
-        let retired = &self.retired;
-        self.far.retain(|&i| !retired[i as usize]);
-        for &i in &self.far {
-            let iu = i as usize;
-            if self.nn[iu] != NONE && fused.changed_now(self.nn[iu]) {
-                self.mark[iu] = self.epoch;
-                recompute.push(i);
-            }
-        }
-        let mut slot_min = vec![f64::INFINITY; changed.len()];
-        // Push: targets in the 27 voxels around each changed slot.
-        let ix = std::sync::Arc::clone(&self.ix);
-        for (ci, &s) in changed.iter().enumerate() {
-            let q = fused.pos[s as usize];
-            let k = fused.key[s as usize];
-            let mut own = f64::INFINITY;
-            ix.for_runs_around(k, 1, |t, lo, hi| {
-                if self.live[t as usize] == 0 {
-                    return;
-                }
-                for i in lo..hi {
-                    let iu = i as usize;
-                    if self.retired[iu] {
-                        continue;
-                    }
-                    let d = dist2(ix.pts[iu], q);
-                    own = own.min(d);
-                    if self.nn[iu] == s {
-                        if d <= self.d2[iu] {
-                            self.d2[iu] = if d < self.cap2 { d } else { f64::INFINITY };
-                            record_touch(&mut self.tstamp, &mut self.touched, self.epoch, i);
-                        } else if self.mark[iu] != self.epoch {
-                            self.mark[iu] = self.epoch;
-                            recompute.push(i);
-                        }
-                    } else if d < self.d2[iu] && d < self.cap2 {
-                        self.d2[iu] = d;
-                        self.nn[iu] = s;
-                        record_touch(&mut self.tstamp, &mut self.touched, self.epoch, i);
-                    }
-                }
-            });
-            slot_min[ci] = own;
-        }
-        // Far targets: minimum with the changed slots, or a full search if their slot moved.
-        // Both are pure per-target computations (run in parallel on the current rayon pool,
-        // which helps a lone long episode), applied afterwards in target order.
-        let far = std::mem::take(&mut self.far);
-        if !far.is_empty() && !changed.is_empty() {
-            let groups = ChangedBlocks::new(fused, changed);
-            // Far targets are sorted by block: one group per target block.
-            let mut spans = Vec::new();
-            let mut start = 0;
-            while start < far.len() {
-                let tb = self.block_of_point(far[start] as usize);
-                let mut end = start + 1;
-                while end < far.len() && self.block_of_point(far[end] as usize) == tb {
-                    end += 1;
-                }
-                spans.push((start, end, tb));
-                start = end;
-            }
-            let this = &*self;
-            let updates: Vec<Vec<FarUpdate>> = spans
-                .par_iter()
-                .with_min_len(8)
-                .map(|&(s, e, tb)| this.far_block(fused, &groups, &far[s..e], tb))
-                .collect();
-            for u in updates.iter().flatten() {
-                let iu = u.target as usize;
-                self.d2[iu] = u.d2;
-                record_touch(&mut self.tstamp, &mut self.touched, self.epoch, u.target);
-                self.nn[iu] = u.nn;
-                if u.resolved {
-                    self.mark[iu] = 0;
-                }
-            }
-        }
-        let todo: Vec<u32> =
-            recompute.iter().copied().filter(|&i| self.mark[i as usize] == self.epoch).collect();
         let this = &*self;
-        let found: Vec<(f64, u32)> =
-            todo.par_iter().with_min_len(64).map(|&i| this.search_moved(fused, i as usize)).collect();
-        for (&i, &(d, s)) in todo.iter().zip(&found) {
-            self.d2[i as usize] = d;
-            record_touch(&mut self.tstamp, &mut self.touched, self.epoch, i);
-            self.nn[i as usize] = s;
-        }
-        // The next far list: previous far targets and recomputed ones still farther than h.
-        let mut next: Vec<u32> =
-            far.into_iter().chain(recompute).filter(|&i| self.d2[i as usize] > h2).collect();
-        next.sort_unstable();
-        next.dedup();
-        self.far = next;
-        // Fused→target: exact when the push found a target within h (anything else is ≥ h).
-        for (m, &s) in slot_min.iter_mut().zip(changed) {
-            if *m > h2 {
-                *m = self.nearest_d2(fused.pos[s as usize]);
+        let changes: Vec<Vec<Change>> = self
+            .live_blocks
+            .par_iter()
+            .with_min_len(16)
+            .map(|&tb| this.block_changes(fused, groups, tb))
+            .collect();
+        let mut any_retired = false;
+        for c in changes.iter().flatten() {
+            let i = c.target as usize;
+            let old = self.d2[i];
+            if old != c.d2 {
+                for (n, &t) in self.counts.iter_mut().zip(&self.t2) {
+                    match (old < t, c.d2 < t) {
+                        (false, true) => *n += 1,
+                        (true, false) => *n -= 1,
+                        _ => {}
+                    }
+                }
+                self.d2[i] = c.d2;
+                self.nn[i] = c.nn;
+            }
+            if c.retire {
+                // Marked by NONE in `nn`: the distance is frozen below τ_min².
+                self.nn[i] = NONE;
+                self.retired += 1;
+                any_retired = true;
             }
         }
-        slot_min
+        if any_retired {
+            let (nn, d2) = (&self.nn, &self.d2);
+            for &tb in &self.live_blocks {
+                self.live[tb as usize].retain(|&i| !(nn[i as usize] == NONE && d2[i as usize].is_finite()));
+            }
+            let live = &self.live;
+            self.live_blocks.retain(|&tb| !live[tb as usize].is_empty());
+        }
     }
 
-    /// For a target whose nearest slot moved in this step: d² to that slot's new position and
-    /// the slot — an upper bound of its new distance —, or `(cap², NONE)` when that is not
-    /// below the cap.
-    fn moved_bound(&self, fused: &FusedCloud, i: usize) -> (f64, u32) {
-        match self.nn[i] {
-            NONE => (self.cap2, NONE),
-            n => {
-                let d = dist2(self.ix.pts[i], fused.pos[n as usize]);
-                if d < self.cap2 {
-                    (d, n)
-                } else {
-                    (self.cap2, NONE)
+    /// The changes of the live targets of target block `tb` (see the module docs).
+    fn block_changes(&self, fused: &FusedCloud, groups: &ChangedBlocks, tb: u32) -> Vec<Change> {
+        let domain = &self.ix.domain;
+        let (key, _, _) = self.ix.blocks[tb as usize];
+        let e = domain.h * BLOCK as f64;
+        let reach = (self.r2.sqrt() / e).ceil() as i32;
+        let mut cand: Vec<(f64, usize)> = Vec::new();
+        for dz in -reach..=reach {
+            for dy in -reach..=reach {
+                for dx in -reach..=reach {
+                    let b = [key[0] + dx, key[1] + dy, key[2] + dz];
+                    let Some(bi) = domain.block_index(b) else { continue };
+                    let gi = groups.lookup[bi];
+                    if gi != NONE {
+                        let lb = block_box_dist2(domain, key, b);
+                        if lb < self.r2 {
+                            cand.push((lb, gi as usize));
+                        }
+                    }
                 }
             }
         }
-    }
-
-    /// The far targets `idx` of target block `tb` against the changed slots: the updates of
-    /// those whose distance changed (`resolved`: a target whose nearest slot moved and whose
-    /// answer is now known without a search).
-    fn far_block(
-        &self,
-        fused: &FusedCloud,
-        groups: &ChangedBlocks,
-        idx: &[u32],
-        tb: [i32; 3],
-    ) -> Vec<FarUpdate> {
-        let h2 = self.ix.domain.h * self.ix.domain.h;
         let mut out = Vec::new();
-        let mut max_d2: f64 = 0.0;
-        for &i in idx {
-            let iu = i as usize;
-            let bound = if self.mark[iu] == self.epoch {
-                // Nearest slot moved: its new position bounds the answer.
-                self.moved_bound(fused, iu).0
-            } else {
-                self.d2[iu].min(self.cap2)
-            };
-            max_d2 = max_d2.max(bound);
-        }
-        if max_d2 <= 0.0 {
-            return out;
-        }
-        let mut cand: Vec<(f64, usize)> = Vec::new();
-        groups.candidates(&self.ix.domain, tb, max_d2, &mut cand);
         if cand.is_empty() {
-            // No changed slot is close enough to improve any target of this block.
+            // No changed slot within τ_max of this block: nothing in it can change.
             return out;
         }
         cand.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        for &i in idx {
+        let epoch = fused.epoch();
+        for &i in &self.live[tb as usize] {
             let iu = i as usize;
             let p = self.ix.pts[iu];
-            let moved = self.mark[iu] == self.epoch;
-            let mut best =
-                if moved { self.moved_bound(fused, iu) } else { (self.d2[iu].min(self.cap2), self.nn[iu]) };
-            if !moved && best.0 <= 4.0 * h2 {
-                // Close: the changed slots within √d² lie in the fine voxels within
-                // ⌈√d²/h⌉ ≤ 2 of p's.
-                let k = self.ix.domain.key(p);
-                let r = (best.0.sqrt() / self.ix.domain.h).ceil() as i32;
-                for dz in -r..=r {
-                    for dy in -r..=r {
-                        for dx in -r..=r {
-                            let s = fused.slot_at([k[0] + dx, k[1] + dy, k[2] + dz]);
-                            if s != NONE && fused.changed_now(s) {
-                                let d = dist2(p, fused.pos[s as usize]);
-                                if d < best.0 {
-                                    best = (d, s);
-                                }
-                            }
-                        }
-                    }
+            let (old, old_nn) = (self.d2[iu], self.nn[iu]);
+            let moved = old_nn != NONE && fused.stamp[old_nn as usize] == epoch;
+            // The nearest changed slot below the bound that matters.
+            let mut best = if moved {
+                let d = dist2(p, fused.pos[old_nn as usize]);
+                if d < self.r2 {
+                    (d, old_nn)
+                } else {
+                    (self.r2, NONE)
                 }
             } else {
-                for &(lb, gi) in &cand {
-                    if lb >= best.0 {
-                        break;
-                    }
-                    let g = &groups.blocks[gi];
-                    if g.aabb.dist2(p) >= best.0 {
-                        continue;
-                    }
-                    let (d, j) = groups.nearest_in_group(g, p);
-                    if d < best.0 {
-                        best = (d, groups.slots[j]);
-                    }
+                (old.min(self.r2), NONE)
+            };
+            for &(lb, gi) in &cand {
+                if lb >= best.0 {
+                    break;
+                }
+                let g = &groups.blocks[gi];
+                if g.aabb.dist2(p) >= best.0 {
+                    continue;
+                }
+                let (d, j) = groups.nearest_in_group(g, p);
+                if d < best.0 {
+                    best = (d, groups.slots[j]);
                 }
             }
-            if moved {
-                // Every unchanged slot is at least as far as the stored distance (the minimum
-                // before this step, or a changed slot's distance the push found): if a changed
-                // slot is that close, it is the answer and no search is needed.
-                if best.0 <= self.d2[iu] && best.1 != NONE {
-                    out.push(FarUpdate { target: i, d2: best.0, nn: best.1, resolved: true });
+            let (d2, nn) = if !moved {
+                if best.1 == NONE {
+                    (old, old_nn)
+                } else {
+                    best
                 }
-            } else if best.0 < self.d2[iu] && best.0 < self.cap2 {
-                out.push(FarUpdate { target: i, d2: best.0, nn: best.1, resolved: false });
+            } else if best.1 != NONE && best.0 <= old {
+                best
+            } else {
+                // Some unchanged slot may lie between the old distance and the best changed one.
+                let bound = if best.1 == NONE { self.r2 } else { best.0 };
+                let (d, s) = fused.nearest(p, bound);
+                if s != NONE {
+                    (d, s)
+                } else if best.1 != NONE {
+                    best
+                } else {
+                    (f64::INFINITY, NONE)
+                }
+            };
+            let retire = self.permanent(fused, p, nn);
+            if d2 != old || nn != old_nn || retire {
+                out.push(Change { target: i, d2, nn, retire });
             }
         }
         out
     }
 
-    /// A full nearest search for target `i`, whose nearest slot moved away: `(d², slot)`, or
-    /// `(∞, NONE)` when nothing is within the cap. The moved slot's new position bounds the
-    /// answer from above, which keeps the search local.
-    fn search_moved(&self, fused: &FusedCloud, i: usize) -> (f64, u32) {
-        let (ub, ub_slot) = self.moved_bound(fused, i);
-        let (d, s) = fused.nearest(self.ix.pts[i], ub);
-        let (d, s) = if s == NONE { (ub, ub_slot) } else { (d, s) };
-        if s == NONE {
-            (f64::INFINITY, NONE)
-        } else {
-            (d, s)
+    /// Whether an occupied voxel lies entirely within τ_min of `p`: its own, or that of its
+    /// nearest slot `nn`.
+    fn permanent(&self, fused: &FusedCloud, p: [f64; 3], nn: u32) -> bool {
+        let domain = &self.ix.domain;
+        let own = domain.key(p);
+        if fused.slot_at(own) != NONE && max_corner_d2(domain.h, own, p) < self.retire2 {
+            return true;
         }
-    }
-
-    /// Target-block index of point `i` (points are sorted by block).
-    fn block_of_point(&self, i: usize) -> [i32; 3] {
-        block_of(self.ix.domain.key(self.ix.pts[i]))
+        nn != NONE && max_corner_d2(domain.h, fused.key[nn as usize], p) < self.retire2
     }
 }
 
-/// A far target's new distance (see [`Targets::far_block`]).
-struct FarUpdate {
-    target: u32,
-    d2: f64,
-    nn: u32,
-    resolved: bool,
-}
-
-/// Squared distance between the boxes of two blocks (0 when they touch or overlap).
-fn block_box_dist2(d: &Domain, a: [i32; 3], b: [i32; 3]) -> f64 {
-    let e = d.h * BLOCK as f64;
+/// Squared distance from `p` to the farthest corner of fine voxel `k` (size `h`): every point
+/// of the voxel is at most that far.
+fn max_corner_d2(h: f64, k: [i32; 3], p: [f64; 3]) -> f64 {
     let mut s = 0.0;
-    for ax in 0..3 {
-        let gap = ((a[ax] - b[ax]).abs() - 1).max(0) as f64 * e;
-        s += gap * gap;
+    for a in 0..3 {
+        let lo = k[a] as f64 * h;
+        let d = (p[a] - lo).abs().max((lo + h - p[a]).abs());
+        s += d * d;
     }
     s
-}
-
-/// Lanes of the vectorized nearest scan.
-const LANES: usize = 4;
-
-/// The changed slots of one step grouped by block.
-struct ChangedBlocks {
-    blocks: Vec<ChangedBlock>,
-    /// Slots by group, each group padded with NONE to whole lanes.
-    slots: Vec<u32>,
-    /// Their positions by coordinate (padding at +∞).
-    xyz: [Vec<f64>; 3],
-    /// Domain block index → index into `blocks`, or NONE.
-    lookup: Vec<u32>,
-}
-
-struct ChangedBlock {
-    key: [i32; 3],
-    range: (usize, usize),
-    /// The box of its changed slots' positions (a tighter bound than the block's cube).
-    aabb: Aabb,
-}
-
-impl ChangedBlocks {
-    fn new(fused: &FusedCloud, changed: &[u32]) -> ChangedBlocks {
-        let mut v: Vec<(u32, u32)> = changed.iter().map(|&s| (fused.block[s as usize], s)).collect();
-        v.sort_unstable();
-        let mut blocks = Vec::new();
-        let cap = v.len() + 3 * v.len().min(fused.domain.num_blocks());
-        let mut slots = Vec::with_capacity(cap);
-        let mut xyz: [Vec<f64>; 3] =
-            [Vec::with_capacity(cap), Vec::with_capacity(cap), Vec::with_capacity(cap)];
-        let mut i = 0;
-        while i < v.len() {
-            let b = v[i].0;
-            let start = slots.len();
-            let mut aabb = Aabb::EMPTY;
-            while i < v.len() && v[i].0 == b {
-                let q = fused.pos[v[i].1 as usize];
-                slots.push(v[i].1);
-                for (c, &x) in xyz.iter_mut().zip(&q) {
-                    c.push(x);
-                }
-                aabb.grow(q);
-                i += 1;
-            }
-            // Pad to whole lanes with points at infinity (never nearest).
-            while (slots.len() - start) % LANES != 0 {
-                slots.push(NONE);
-                for c in xyz.iter_mut() {
-                    c.push(f64::INFINITY);
-                }
-            }
-            blocks.push(ChangedBlock {
-                key: fused.domain.block_key(b as usize),
-                range: (start, slots.len()),
-                aabb,
-            });
-        }
-        let mut lookup = vec![NONE; fused.domain.num_blocks()];
-        for (gi, g) in blocks.iter().enumerate() {
-            if let Some(b) = fused.domain.block_index(g.key) {
-                lookup[b] = gi as u32;
-            }
-        }
-        ChangedBlocks { blocks, slots, xyz, lookup }
-    }
-
-    /// The nearest changed slot of group `g` to `p`: (d², position in `slots`). The positions
-    /// are stored by coordinate and padded to whole lanes so that this loop vectorizes; ties
-    /// go to the earlier slot of the lane.
-    #[inline]
-    fn nearest_in_group(&self, g: &ChangedBlock, p: [f64; 3]) -> (f64, usize) {
-        let (lo, hi) = g.range;
-        let (xs, ys, zs) = (&self.xyz[0][lo..hi], &self.xyz[1][lo..hi], &self.xyz[2][lo..hi]);
-        let mut m = [f64::INFINITY; LANES];
-        let mut at = [0usize; LANES];
-        for (c, ((x, y), z)) in
-            xs.chunks_exact(LANES).zip(ys.chunks_exact(LANES)).zip(zs.chunks_exact(LANES)).enumerate()
-        {
-            for l in 0..LANES {
-                let dx = x[l] - p[0];
-                let dy = y[l] - p[1];
-                let dz = z[l] - p[2];
-                let d = dx * dx + dy * dy + dz * dz;
-                let better = d < m[l];
-                m[l] = if better { d } else { m[l] };
-                at[l] = if better { c * LANES + l } else { at[l] };
-            }
-        }
-        let mut best = (f64::INFINITY, lo);
-        for l in 0..LANES {
-            if m[l] < best.0 || (m[l] == best.0 && lo + at[l] < best.1) {
-                best = (m[l], lo + at[l]);
-            }
-        }
-        best
-    }
-
-    /// Groups whose block box is closer than √max_d2 to target block `tb`, with that lower
-    /// bound: by dense lookup of the blocks around `tb` when that is cheaper than a scan.
-    fn candidates(&self, domain: &Domain, tb: [i32; 3], max_d2: f64, out: &mut Vec<(f64, usize)>) {
-        let e = domain.h * BLOCK as f64;
-        let reach = if max_d2.is_finite() { (max_d2.sqrt() / e).ceil() as i64 + 1 } else { i64::MAX };
-        let side = reach.saturating_mul(2).saturating_add(1);
-        let volume = side.saturating_mul(side).saturating_mul(side);
-        if volume < self.blocks.len() as i64 {
-            let r = reach as i32;
-            for dz in -r..=r {
-                for dy in -r..=r {
-                    for dx in -r..=r {
-                        let b = [tb[0] + dx, tb[1] + dy, tb[2] + dz];
-                        let Some(bi) = domain.block_index(b) else { continue };
-                        let gi = self.lookup[bi];
-                        if gi != NONE {
-                            let lb = block_box_dist2(domain, tb, b);
-                            if lb < max_d2 {
-                                out.push((lb, gi as usize));
-                            }
-                        }
-                    }
-                }
-            }
-        } else {
-            for (gi, g) in self.blocks.iter().enumerate() {
-                let lb = block_box_dist2(domain, tb, g.key);
-                if lb < max_d2 {
-                    out.push((lb, gi));
-                }
-            }
-        }
-    }
 }
 
 #[cfg(test)]
@@ -677,24 +322,9 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
-    fn brute(targets: &Targets, fused: &FusedCloud, cap2: f64) -> Vec<f64> {
-        targets
-            .points()
-            .iter()
-            .map(|&p| {
-                let d = fused.pos.iter().map(|&q| dist2(p, q)).fold(f64::INFINITY, f64::min);
-                if d < cap2 {
-                    d
-                } else {
-                    f64::INFINITY
-                }
-            })
-            .collect()
-    }
-
-    /// Random "views": patches of a sphere of radius 0.5 sampled densely, with jitter, so
-    /// voxels are revisited and centroids move.
-    fn patch(rng: &mut rand_chacha::ChaCha8Rng, n: usize) -> Vec<[f64; 3]> {
+    /// Random "views": dense patches of a sphere of radius 0.5 with jitter, so voxels are
+    /// revisited and centroids move.
+    fn patch(rng: &mut rand_chacha::ChaCha8Rng, n: usize, radius: f64) -> Vec<[f64; 3]> {
         let c: [f64; 3] = [rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)];
         let cn = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
         (0..n)
@@ -705,191 +335,80 @@ mod tests {
                     c[2] / cn + rng.gen_range(-0.5..0.5),
                 ];
                 let dn = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                (dn > 0.0).then(|| [0.5 * d[0] / dn, 0.5 * d[1] / dn, 0.5 * d[2] / dn])
+                let r = radius + rng.gen_range(-0.002..0.002);
+                (dn > 0.0).then(|| [r * d[0] / dn, r * d[1] / dn, r * d[2] / dn])
             })
             .collect()
     }
 
-    #[test]
-    fn incremental_distances_equal_brute_force() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-        let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.05);
-        // Targets: the sphere (radius 0.5) plus an inner sphere (never observed: stays far).
-        let mut tp: Vec<[f64; 3]> = patch(&mut rng, 4000);
-        tp.extend(patch(&mut rng, 4000));
-        tp.extend(patch(&mut rng, 500).iter().map(|p| [p[0] * 0.5, p[1] * 0.5, p[2] * 0.5]));
-        for cap in [f64::INFINITY, 0.03] {
-            let mut fused = FusedCloud::new(domain.clone());
-            let mut t = Targets::new(domain.clone(), &tp, cap).unwrap();
-            assert_eq!(t.len(), tp.len());
-            let mut sticky = vec![[false; 3]; tp.len()];
-            for step in 0..6 {
-                let obs = patch(&mut rng, 6000);
-                let delta = fused.insert(&obs);
-                let to_t = t.update(&fused, &delta.changed);
-                for (&s, &d) in delta.changed.iter().zip(&to_t) {
-                    let q = fused.pos[s as usize];
-                    let b = t.points().iter().map(|&p| dist2(p, q)).fold(f64::INFINITY, f64::min);
-                    assert_eq!(d, b, "fused→target distance of slot {s}");
-                }
-                let want = brute(&t, &fused, cap * cap);
-                for (i, (&a, &b)) in t.d2.iter().zip(&want).enumerate() {
-                    assert!(a == b, "cap {cap} step {step} target {i}: {a} vs brute {b}");
-                }
-                // Sticky coverage, counted incrementally, against the brute-force history.
-                let taus = [0.01, 0.02, 0.03];
-                for (e, &d) in sticky.iter_mut().zip(&want) {
-                    for (j, &tau) in taus.iter().enumerate() {
-                        if d < tau * tau {
-                            e[j] = true;
-                        }
-                    }
-                }
-                let manual: Vec<f64> =
-                    (0..3).map(|j| sticky.iter().filter(|e| e[j]).count() as f64 / tp.len() as f64).collect();
-                assert_eq!(t.coverage(&taus), manual, "cap {cap} step {step}");
-            }
-        }
-    }
-
-    #[test]
-    fn retiring_covered_targets_keeps_coverage() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-        let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.05);
-        let tp: Vec<[f64; 3]> = patch(&mut rng, 6000);
-        let taus = [0.01, 0.02, 0.03];
-        let mut fused = FusedCloud::new(domain.clone());
-        let mut plain = Targets::new(domain.clone(), &tp, 0.03).unwrap();
-        let mut retiring = Targets::new(domain.clone(), &tp, 0.03).unwrap().retire_covered();
-        for _ in 0..8 {
-            let delta = fused.insert(&patch(&mut rng, 3000));
-            plain.update(&fused, &delta.changed);
-            retiring.update(&fused, &delta.changed);
-            assert_eq!(plain.coverage(&taus), retiring.coverage(&taus));
-        }
-        assert!(retiring.retired.iter().any(|&r| r), "some targets were retired");
-    }
-
-    #[test]
-    fn mark_within_equals_brute_force() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
-        let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.05);
-        let tp = patch(&mut rng, 5000);
-        let t = Targets::new(domain, &tp, 0.01).unwrap();
-        let pts = patch(&mut rng, 800);
-        for tau in [0.004, 0.01, 0.023] {
-            let mut bits = vec![0u64; t.len().div_ceil(64)];
-            t.mark_within(&pts, tau, &mut bits);
-            for (i, &p) in t.points().iter().enumerate() {
-                let want = pts.iter().any(|&q| dist2(p, q) < tau * tau);
-                assert_eq!(bits[i / 64] >> (i % 64) & 1 == 1, want, "tau {tau} target {i}");
-            }
-        }
-    }
-
-    #[test]
-    fn fractions_and_mean() {
-        let domain = Domain::covering(0.005, [-1.0; 3], [1.0; 3], 0.05);
-        let tp = vec![[0.0, 0.0, 0.0], [0.015, 0.0, 0.0], [0.5, 0.0, 0.0]];
-        let mut t = Targets::new(domain.clone(), &tp, f64::INFINITY).unwrap();
-        let mut fused = FusedCloud::new(domain);
-        let d = fused.insert(&[[0.001, 0.0, 0.0]]);
-        t.update(&fused, &d.changed);
-        // Distances 0.001, 0.014, 0.499 (points sorted by voxel: same order here).
-        let f = t.fractions(&[0.01, 0.02, 0.03]);
-        assert_eq!(f, vec![1.0 / 3.0, 2.0 / 3.0, 2.0 / 3.0]);
-        let mean = (0.001f64.powi(2) + 0.014f64.powi(2) + 0.499f64.powi(2)) / 3.0;
-        assert!((t.mean_d2() - mean).abs() < 1e-12);
-        assert!(
-            Targets::new(Domain::covering(0.005, [0.0; 3], [0.1; 3], 0.0), &[[3.0, 0.0, 0.0]], 1.0).is_err()
-        );
-    }
-}
-
-impl Targets {
-    /// Squared distance from `p` to the nearest target point (exact; ∞ when there are none).
-    pub fn nearest_d2(&self, p: [f64; 3]) -> f64 {
-        nearest_in(self, p, f64::INFINITY).0
-    }
-
-    /// Sets bit i of `bits` (targets in [`Targets::points`] order, 64 per word) for every
-    /// target strictly closer than `tau` to one of `points` — the coverage of one fused view
-    /// without distance bookkeeping (the oracle's per-candidate gains). Each point visits the
-    /// fine voxels within ⌈τ/h⌉ of its own, as runs along x that are contiguous in the sorted
-    /// targets.
-    pub fn mark_within(&self, points: &[[f64; 3]], tau: f64, bits: &mut [u64]) {
-        let t2 = tau * tau;
-        let r = (tau / self.ix.domain.h).ceil() as i32;
-        for &q in points {
-            self.ix.for_runs_around(self.ix.domain.key(q), r, |_, lo, hi| {
-                for i in lo..hi {
-                    if dist2(self.ix.pts[i as usize], q) < t2 {
-                        bits[i as usize / 64] |= 1 << (i % 64);
-                    }
-                }
-            });
-        }
-    }
-
-    /// The index range of the targets in target block `t`.
-    fn block_range(&self, t: u32) -> std::ops::Range<usize> {
-        let s = &self.ix.cell_start[t as usize];
-        s[0] as usize..s[BLOCK_CELLS] as usize
-    }
-}
-
-impl Bucketed for Targets {
-    fn domain(&self) -> &Domain {
-        &self.ix.domain
-    }
-    fn for_cell<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], mut f: F) {
-        let Some(b) = self.ix.domain.block_index(block_of(k)) else { return };
-        let t = self.ix.table[b];
-        if t != NONE {
-            let s = &self.ix.cell_start[t as usize];
-            let li = local_index(k);
-            for i in s[li]..s[li + 1] {
-                f(i, self.ix.pts[i as usize]);
-            }
-        }
-    }
-    fn for_block<F: FnMut(u32, [f64; 3])>(&self, b: [i32; 3], mut f: F) {
-        let Some(bi) = self.ix.domain.block_index(b) else { return };
-        let t = self.ix.table[bi];
-        if t != NONE {
-            for i in self.block_range(t) {
-                f(i as u32, self.ix.pts[i]);
-            }
-        }
-    }
-    fn supergrid(&self) -> &SuperGrid {
-        &self.ix.supergrid
-    }
-}
-
-#[cfg(test)]
-mod nearest_tests {
-    use super::*;
-    use rand::{Rng, SeedableRng};
-
-    #[test]
-    fn nearest_target_equals_brute_force() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
-        let domain = Domain::covering(0.005, [-1.0; 3], [1.0; 3], 0.05);
-        let pts: Vec<[f64; 3]> = (0..3000)
-            .map(|i| {
-                if i % 10 == 0 {
-                    [rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)]
-                } else {
-                    [rng.gen_range(-0.2..0.2), 0.3 + rng.gen_range(-0.01..0.01), rng.gen_range(-0.2..0.2)]
-                }
-            })
+    /// Brute force: per τ, the targets with some fused point at d² < τ².
+    fn brute(points: &[[f64; 3]], fused: &FusedCloud, taus: &[f64]) -> Vec<Vec<bool>> {
+        let near: Vec<f64> = points
+            .iter()
+            .map(|&p| fused.pos.iter().map(|&q| dist2(p, q)).fold(f64::INFINITY, f64::min))
             .collect();
-        let t = Targets::new(domain, &pts, f64::INFINITY).unwrap();
-        for _ in 0..500 {
-            let p = [rng.gen_range(-1.0..1.0), rng.gen_range(-0.1..0.7), rng.gen_range(-1.0..1.0)];
-            let want = pts.iter().map(|&q| dist2(p, q)).fold(f64::INFINITY, f64::min);
-            assert_eq!(t.nearest_d2(p), want);
+        taus.iter().map(|t| near.iter().map(|&d| d < t * t).collect()).collect()
+    }
+
+    #[test]
+    fn instantaneous_coverage_equals_brute_force() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
+        let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.05);
+        // Targets on the sphere, on a shell 0.015 inside it (covered only at the larger τ, and
+        // uncovered again when centroids drift) and on an inner sphere (never covered).
+        let mut tp: Vec<[f64; 3]> = patch(&mut rng, 3000, 0.5);
+        tp.extend(patch(&mut rng, 3000, 0.5));
+        tp.extend(patch(&mut rng, 2000, 0.485));
+        tp.extend(patch(&mut rng, 300, 0.25));
+        for taus in [vec![0.01, 0.02, 0.03], vec![0.03, 0.004], vec![0.012]] {
+            let mut fused = FusedCloud::new(domain.clone());
+            let mut cov = Coverage::new(domain.clone(), &tp, &taus).unwrap();
+            assert_eq!(cov.len(), tp.len());
+            for step in 0..10 {
+                let delta = fused.insert(&patch(&mut rng, 5000, 0.5));
+                cov.update(&fused, &ChangedBlocks::new(&fused, &delta.changed));
+                let want = brute(cov.points(), &fused, &taus);
+                for (j, w) in want.iter().enumerate() {
+                    assert_eq!(&cov.covered(j), w, "taus {taus:?} step {step} τ #{j}");
+                    let n = w.iter().filter(|&&c| c).count();
+                    assert_eq!(cov.counts()[j], n, "taus {taus:?} step {step} τ #{j}");
+                }
+            }
+            // Observed targets retire where τ_min exceeds a voxel's diagonal (h√3 ≈ 0.0087).
+            let tmin = taus.iter().cloned().fold(f64::INFINITY, f64::min);
+            assert_eq!(cov.retired() > 0, tmin > 0.009, "taus {taus:?}");
         }
+    }
+
+    #[test]
+    fn coverage_can_drop_when_a_centroid_drifts_away() {
+        // One target 0.0101 from a first observation: covered at τ = 0.0102; a second
+        // observation in the same voxel moves the centroid away, and coverage drops (sticky
+        // coverage would keep it).
+        let domain = Domain::covering(0.005, [-0.1; 3], [0.1; 3], 0.05);
+        let target = [0.0121, 0.0026, 0.0026];
+        let mut cov = Coverage::new(domain.clone(), &[target], &[0.0102]).unwrap();
+        let mut fused = FusedCloud::new(domain);
+        let d = fused.insert(&[[0.002, 0.0026, 0.0026]]);
+        cov.update(&fused, &ChangedBlocks::new(&fused, &d.changed));
+        assert_eq!(cov.counts(), &[1]);
+        let d = fused.insert(&[[0.0001, 0.0026, 0.0026]]);
+        cov.update(&fused, &ChangedBlocks::new(&fused, &d.changed));
+        // Centroid (0.002 + 0.0001) / 2 = 0.00105: 0.01105 away.
+        assert_eq!(cov.counts(), &[0]);
+        assert_eq!(cov.retired(), 0);
+    }
+
+    #[test]
+    fn a_target_whose_own_voxel_is_occupied_retires_covered() {
+        let domain = Domain::covering(0.005, [-0.1; 3], [0.1; 3], 0.05);
+        let mut cov = Coverage::new(domain.clone(), &[[0.0049, 0.0049, 0.0049]], &[0.01, 0.02]).unwrap();
+        let mut fused = FusedCloud::new(domain);
+        let d = fused.insert(&[[0.0001, 0.0001, 0.0001]]);
+        cov.update(&fused, &ChangedBlocks::new(&fused, &d.changed));
+        assert_eq!((cov.counts(), cov.retired()), (&[1usize, 1][..], 1));
+        assert!(Coverage::new(Domain::covering(0.005, [0.0; 3], [0.1; 3], 0.0), &[[3.0, 0.0, 0.0]], &[0.01])
+            .is_err());
+        assert!(Coverage::new(Domain::covering(0.005, [0.0; 3], [0.1; 3], 0.0), &[], &[]).is_err());
     }
 }

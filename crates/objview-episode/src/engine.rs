@@ -3,7 +3,8 @@
 //! when the episode ends. [`Episode`] is step-driven (the server drives it one request at a
 //! time); [`run_episode`] drives a local [`Planner`] to the end.
 //!
-//! The scoring of each view (SC, NSC, CD, PC, MS, #Views, PR) is [`crate::metrics`].
+//! The scoring of each view (SC, NSC, PC, MS, #Views, PR; CD at checkpoints) is
+//! [`crate::metrics`].
 //!
 //! Frames: every pose is in the object frame (normalized object units, roll in radians).
 
@@ -16,13 +17,14 @@ use objview_geom::{Mesh, Pose};
 use objview_render::{Camera, Frame, Intrinsics, Renderer};
 use objview_views::ViewSpace;
 
-use crate::coverage::Targets;
+use crate::chamfer::Targets;
+use crate::coverage::Coverage;
 use crate::fusion::FusedCloud;
-use crate::grid::Domain;
+use crate::grid::{ChangedBlocks, Domain};
 use crate::metrics;
 use crate::planner::{Action, Environment, EpisodeContext, Observation, OracleAccess, Planner};
 use crate::reference::Reference;
-use crate::result::{Checkpoint, EpisodeResult, Metrics, Step};
+use crate::result::{Checkpoint, EpisodeResult, Step, StepMetrics};
 use crate::settings::EpisodeSettings;
 use crate::stabilization::Stabilization;
 use crate::validate::{check_pose, check_view_pose};
@@ -50,28 +52,55 @@ pub struct Scene {
     pub domain: Domain,
     /// The camera intrinsics of every view (SPEC §2).
     pub intrinsics: Intrinsics,
-    /// Fresh (never updated) ground-truth and reference target sets for the reference cap
-    /// they were built with: every episode on the scene starts from a clone, sharing their
-    /// spatial indexes (see [`Scene::fresh_targets`]).
-    pub(crate) targets: std::sync::OnceLock<Arc<(f64, Targets, Targets)>>,
+    /// What every episode on the scene starts from (coverage and CD sets with nothing fused),
+    /// built once for the first τ list asked for and shared (see [`Scene::fresh_targets`]).
+    pub(crate) targets: std::sync::OnceLock<Arc<FreshTargets>>,
+    /// The reference's exact-distance index in [`Coverage::points`] order (the oracle's).
+    pub(crate) reference_targets: std::sync::OnceLock<Arc<Targets>>,
+}
+
+/// The target sets of a new episode: coverage of the ground truth (SC) and of the reference
+/// (NSC) at a τ list, and the ground truth's exact distances (CD at checkpoints).
+#[derive(Debug, Clone)]
+pub struct FreshTargets {
+    taus: Vec<f64>,
+    gt: Coverage,
+    reference: Coverage,
+    gt_near: Targets,
 }
 
 impl Scene {
-    /// Ground-truth targets (exact distances) and reference targets (distances capped at
-    /// `reference_cap`) with no distances yet, for a new episode. The indexes are built once
-    /// per scene (and cap) and shared.
-    pub fn fresh_targets(&self, reference_cap: f64) -> Result<(Targets, Targets), EpisodeError> {
+    /// The target sets of a new episode scoring at `taus`. Their indexes are built once per
+    /// scene (for the first τ list; episodes use one τ list in practice) and shared.
+    pub fn fresh_targets(&self, taus: &[f64]) -> Result<FreshTargets, EpisodeError> {
         if let Some(t) = self.targets.get() {
-            if t.0 == reference_cap {
-                return Ok((t.1.clone(), t.2.clone()));
+            if t.taus == taus {
+                return Ok((**t).clone());
             }
         }
-        let gt = Targets::new(self.domain.clone(), &self.gt, f64::INFINITY).map_err(EpisodeError::Setup)?;
-        let reference = Targets::new(self.domain.clone(), &self.reference.points, reference_cap)
-            .map_err(EpisodeError::Setup)?;
-        // The first cap asked for is kept (episodes use one τ list in practice).
-        let _ = self.targets.set(Arc::new((reference_cap, gt.clone(), reference.clone())));
-        Ok((gt, reference))
+        let fresh = FreshTargets {
+            taus: taus.to_vec(),
+            gt: Coverage::new(self.domain.clone(), &self.gt, taus).map_err(EpisodeError::Setup)?,
+            reference: Coverage::new(self.domain.clone(), &self.reference.points, taus)
+                .map_err(EpisodeError::Setup)?,
+            gt_near: Targets::new(self.domain.clone(), &self.gt, f64::INFINITY)
+                .map_err(EpisodeError::Setup)?,
+        };
+        let _ = self.targets.set(Arc::new(fresh.clone()));
+        Ok(fresh)
+    }
+
+    /// The observable reference's exact-distance index (points in the order of the NSC
+    /// coverage: bit i of [`Episode::reference_covered`] is its point i), built on first use.
+    pub fn reference_targets(&self) -> Result<Arc<Targets>, EpisodeError> {
+        if let Some(t) = self.reference_targets.get() {
+            return Ok(t.clone());
+        }
+        let t = Arc::new(
+            Targets::new(self.domain.clone(), &self.reference.points, f64::INFINITY)
+                .map_err(EpisodeError::Setup)?,
+        );
+        Ok(self.reference_targets.get_or_init(|| t).clone())
     }
 }
 
@@ -125,10 +154,18 @@ pub struct Episode {
     seed: u64,
     start_pose: Pose,
     fused: FusedCloud,
-    gt: Targets,
-    reference: Targets,
-    /// Per fused slot: d² to the nearest ground-truth point (fused→GT half of CD).
+    /// SC's coverage.
+    gt: Coverage,
+    /// NSC's coverage.
+    reference: Coverage,
+    /// Exact GT → fused distances (CD), as of fused epoch `cd_seen`.
+    gt_near: Targets,
+    /// Per fused slot: d² to the nearest ground-truth point (fused → GT half of CD), as of
+    /// fused epoch `cd_seen`.
     slot_gt_d2: Vec<f64>,
+    cd_seen: u32,
+    /// CD of the latest view, once computed (a checkpoint at that view).
+    cd_now: Option<f64>,
     ms: Vec<Stabilization>,
     history: Vec<Pose>,
     steps: Vec<Step>,
@@ -139,6 +176,9 @@ pub struct Episode {
     terminal: Option<Terminal>,
     renderer: Renderer,
     frame: Frame,
+    /// Buffers reused by every step: the observed points and the changed slots' groups.
+    points: Vec<[f64; 3]>,
+    groups: ChangedBlocks,
     started: Instant,
 }
 
@@ -158,8 +198,7 @@ impl Episode {
         settings.validate().map_err(EpisodeError::Settings)?;
         check_view_pose(&start_pose.to_array())
             .map_err(|e| EpisodeError::Settings(format!("start pose {:?}: {e}", start_pose.to_array())))?;
-        let max_tau = settings.taus.iter().cloned().fold(0.0, f64::max);
-        let (gt, reference) = scene.fresh_targets(max_tau)?;
+        let fresh = scene.fresh_targets(&settings.taus)?;
         let h = settings.fusion_voxel;
         let ms = settings
             .ms_deltas
@@ -175,9 +214,12 @@ impl Episode {
         let cam = Camera::new(start_pose, scene.intrinsics);
         let mut ep = Episode {
             fused: FusedCloud::new(scene.domain.clone()),
-            gt,
-            reference,
+            gt: fresh.gt,
+            reference: fresh.reference,
+            gt_near: fresh.gt_near,
             slot_gt_d2: Vec::new(),
+            cd_seen: 0,
+            cd_now: None,
             ms,
             history: Vec::new(),
             steps: Vec::new(),
@@ -188,6 +230,8 @@ impl Episode {
             terminal: None,
             renderer: Renderer::new(),
             frame: Frame::empty(cam),
+            points: Vec::new(),
+            groups: ChangedBlocks::new(&FusedCloud::new(scene.domain.clone()), &[]),
             started,
             scene,
             settings,
@@ -245,18 +289,32 @@ impl Episode {
         &self.scene
     }
 
-    /// For each reference point, whether it is covered at the smallest τ (NSC's coverage;
+    /// For each reference point, whether it is covered at the smallest τ now (NSC's coverage;
     /// oracle use only).
     pub fn reference_covered(&self) -> Vec<bool> {
         let j = (0..self.settings.taus.len())
             .min_by(|&a, &b| self.settings.taus[a].total_cmp(&self.settings.taus[b]))
             .unwrap_or(0);
-        self.reference.ever_covered(j)
+        self.reference.covered(j)
     }
 
-    /// The planner context of this episode.
-    pub fn context(&self, candidates: Arc<Vec<Pose>>, candidate_set: &str, oracle: bool) -> EpisodeContext {
-        EpisodeContext {
+    /// The planner context of this episode (`oracle`: with ground-truth access, whose reference
+    /// index is built on first use).
+    pub fn context(
+        &self,
+        candidates: Arc<Vec<Pose>>,
+        candidate_set: &str,
+        oracle: bool,
+    ) -> Result<EpisodeContext, EpisodeError> {
+        let oracle = match oracle {
+            true => Some(OracleAccess {
+                mesh: self.scene.mesh.clone(),
+                reference: Arc::new(self.reference.points().to_vec()),
+                reference_targets: self.scene.reference_targets()?,
+            }),
+            false => None,
+        };
+        Ok(EpisodeContext {
             seed: crate::episode_seed(self.seed, &self.scene.uid, &self.scene.space_name, self.budget),
             object_id: self.scene.uid.clone(),
             view_space: self.scene.space_name.clone(),
@@ -265,12 +323,8 @@ impl Episode {
             candidate_set: candidate_set.to_string(),
             start_pose: self.start_pose,
             intrinsics: self.scene.intrinsics,
-            oracle: oracle.then(|| OracleAccess {
-                mesh: self.scene.mesh.clone(),
-                reference: Arc::new(self.reference.points().to_vec()),
-                reference_targets: Arc::new(self.reference.clone()),
-            }),
-        }
+            oracle,
+        })
     }
 
     /// Ends the episode (if it has not ended) with `source`/`reason`.
@@ -375,49 +429,49 @@ impl Episode {
                 .all(|&d| self.checkpoints.contains_key(&CheckpointKey::Stabilized(d)))
     }
 
-    /// Renders, fuses and scores the view from `pose` (the scoring: [`crate::metrics`]).
+    /// Renders, fuses and scores the view from `pose` (the scoring: [`crate::metrics`]); CD
+    /// only when a checkpoint is recorded at this view.
     fn observe(&mut self, pose: Pose, planner_seconds: f64) {
         let t0 = Instant::now();
         let cam = Camera::new(pose, self.scene.intrinsics);
         self.renderer.render_into(&self.scene.mesh, &cam, &mut self.frame);
         let t_render = t0.elapsed().as_secs_f64();
-        let points = self.frame.observed_points();
-        let delta = self.fused.insert(&points);
+        self.frame.observed_points_into(&mut self.points);
+        let delta = self.fused.insert(&self.points);
         let t_fuse = t0.elapsed().as_secs_f64();
-        let to_gt = metrics::update_distances(&mut self.gt, &mut self.reference, &self.fused, &delta.changed);
-        let t_gt = t0.elapsed().as_secs_f64();
-        metrics::record_fused_to_gt(&mut self.slot_gt_d2, self.fused.len(), &delta.changed, to_gt);
+        self.groups.rebuild(&self.fused, &delta.changed);
+        metrics::update_coverage(&mut self.gt, &mut self.reference, &self.fused, &self.groups);
+        let t_cov = t0.elapsed().as_secs_f64();
         metrics::add_new_voxels(&mut self.ms, &self.fused, delta.new_slots);
         self.path_cost = metrics::path_cost(self.path_cost, self.history.last(), &pose);
         self.history.push(pose);
+        self.cd_now = None;
         let step = self.history.len() - 1;
         let taus = &self.settings.taus;
-        let sc = metrics::sc(&mut self.gt, taus);
-        let nsc = metrics::nsc(&mut self.reference, taus);
-        let cd = metrics::chamfer(&self.gt, &self.fused, &self.slot_gt_d2);
-        let scores = Metrics {
+        let scores = StepMetrics {
             views: metrics::views(&self.history),
-            sc,
-            nsc,
-            cd,
+            sc: metrics::sc(&self.gt, taus),
+            nsc: metrics::nsc(&self.reference, taus),
             path_cost: self.path_cost,
             runtime: self.runtime,
         };
-        let (ms_voxels, triggered) = metrics::stabilization_step(&mut self.ms, step);
+        let (ms_voxels, mut keys) = metrics::stabilization_step(&mut self.ms, step);
+        let planner_views = step;
+        if self.ks.contains(&planner_views) {
+            keys.push(CheckpointKey::Budget(planner_views));
+        }
+        if !keys.is_empty() {
+            let cd = self.cd();
+            for key in keys {
+                self.checkpoints.insert(key, Checkpoint { step, metrics: scores.with_cd(cd) });
+            }
+        }
         let (engine_seconds, stage_seconds) = if self.settings.record_timings {
             let total = t0.elapsed().as_secs_f64();
-            (total, [t_render, t_fuse - t_render, t_gt - t_fuse, total - t_gt])
+            (total, [t_render, t_fuse - t_render, t_cov - t_fuse, total - t_cov])
         } else {
             (0.0, [0.0; 4])
         };
-        for key in triggered {
-            self.checkpoints.insert(key, Checkpoint { step, metrics: scores.clone() });
-        }
-        let planner_views = step;
-        if self.ks.contains(&planner_views) {
-            self.checkpoints
-                .insert(CheckpointKey::Budget(planner_views), Checkpoint { step, metrics: scores.clone() });
-        }
         self.steps.push(Step {
             step,
             pose: pose.to_array(),
@@ -430,15 +484,28 @@ impl Episode {
         });
     }
 
+    /// CD of the latest view (computed once per view).
+    fn cd(&mut self) -> f64 {
+        if let Some(cd) = self.cd_now {
+            return cd;
+        }
+        let cd = metrics::chamfer(&mut self.gt_near, &mut self.slot_gt_d2, &self.fused, &mut self.cd_seen);
+        self.cd_now = Some(cd);
+        cd
+    }
+
     /// The result (call after the episode ended; an unfinished episode is recorded as
     /// interrupted).
     pub fn finish(mut self, settings_record: serde_json::Value) -> EpisodeResult {
         if self.terminal.is_none() {
             self.end(TerminalSource::Exception, "interrupted", "the episode was not finished");
         }
+        let cd = self.cd();
         let last = self.steps.last().expect("the start view is always taken");
-        self.checkpoints
-            .insert(CheckpointKey::Terminal, Checkpoint { step: last.step, metrics: last.metrics.clone() });
+        self.checkpoints.insert(
+            CheckpointKey::Terminal,
+            Checkpoint { step: last.step, metrics: last.metrics.with_cd(cd) },
+        );
         let t = self.terminal.clone().unwrap_or(Terminal {
             source: TerminalSource::Exception,
             reason: "interrupted".into(),
@@ -521,7 +588,7 @@ pub fn run_episode(
     }
     let oracle = planner.needs_ground_truth();
     let mut ep = Episode::start(scene.clone(), settings.clone(), method, budget, seed, start_pose)?;
-    let ctx = ep.context(candidates, &settings.candidates, oracle);
+    let ctx = ep.context(candidates, &settings.candidates, oracle)?;
     let covered = |ep: &Episode| oracle.then(|| ep.reference_covered());
     let t = Instant::now();
     let reset = {

@@ -23,6 +23,9 @@ pub struct FusedBlock {
     pub slots: Vec<u32>,
     /// Its entry in the cloud's [`SuperGrid`].
     pub handle: Option<SuperHandle>,
+    /// The fine voxels changed by the insertion `changed_epoch` (bit = local index).
+    changed_bits: [u64; BLOCK_CELLS / 64],
+    changed_epoch: u32,
 }
 
 /// The fused cloud: one point per occupied fine voxel.
@@ -45,8 +48,22 @@ pub struct FusedCloud {
     /// The occupied blocks by superblock (far nearest searches).
     pub supergrid: SuperGrid,
     epoch: u32,
-    acc: Vec<[f64; 3]>,
-    cnt: Vec<u32>,
+    /// Per slot, what the current insertion accumulates (one cache line per point).
+    hot: Vec<Accum>,
+}
+
+/// A slot's sum and count of the current insertion's points, and that insertion's epoch.
+#[derive(Debug, Clone, Copy, Default)]
+#[repr(C, align(32))]
+struct Accum {
+    sum: [f64; 3],
+    count: u32,
+    epoch: u32,
+}
+
+/// Number of set bits.
+fn count_bits(bits: &[u64]) -> usize {
+    bits.iter().map(|b| b.count_ones() as usize).sum()
 }
 
 /// What one insertion changed.
@@ -74,8 +91,7 @@ impl FusedCloud {
             block: Vec::new(),
             stamp: Vec::new(),
             epoch: 0,
-            acc: Vec::new(),
-            cnt: Vec::new(),
+            hot: Vec::new(),
         }
     }
 
@@ -127,24 +143,44 @@ impl FusedCloud {
     /// any, weight 1) and the new points in that voxel, summed in input order.
     pub fn insert(&mut self, points: &[[f64; 3]]) -> FusionDelta {
         self.epoch += 1;
+        let epoch = self.epoch;
         let mut delta = FusionDelta::default();
+        // Blocks touched by this insertion (domain index, allocation index).
+        let mut touched: Vec<(u32, u32)> = Vec::new();
+        // The previous point's block: consecutive pixels mostly share one.
+        let mut last: (usize, u32) = (usize::MAX, NONE);
         for &p in points {
             let k = self.domain.key(p);
             let Some(b) = self.domain.block_index(block_of(k)) else {
                 delta.dropped += 1;
                 continue;
             };
-            if self.table[b] == NONE {
-                self.table[b] = self.blocks.len() as u32;
-                let handle = self.supergrid.add_block(self.domain.block_key(b));
-                self.blocks.push(FusedBlock {
-                    key: self.domain.block_key(b),
-                    cells: Box::new([NONE; BLOCK_CELLS]),
-                    slots: Vec::new(),
-                    handle,
-                });
+            let t = if b == last.0 {
+                last.1
+            } else {
+                let mut t = self.table[b];
+                if t == NONE {
+                    t = self.blocks.len() as u32;
+                    self.table[b] = t;
+                    let handle = self.supergrid.add_block(self.domain.block_key(b));
+                    self.blocks.push(FusedBlock {
+                        key: self.domain.block_key(b),
+                        cells: Box::new([NONE; BLOCK_CELLS]),
+                        slots: Vec::new(),
+                        handle,
+                        changed_bits: [0; BLOCK_CELLS / 64],
+                        changed_epoch: 0,
+                    });
+                }
+                last = (b, t);
+                t
+            };
+            let blk = &mut self.blocks[t as usize];
+            if blk.changed_epoch != epoch {
+                blk.changed_epoch = epoch;
+                blk.changed_bits = [0; BLOCK_CELLS / 64];
+                touched.push((b as u32, t));
             }
-            let blk = &mut self.blocks[self.table[b] as usize];
             let li = local_index(k);
             let mut s = blk.cells[li];
             if s == NONE {
@@ -155,42 +191,58 @@ impl FusedCloud {
                 self.key.push(k);
                 self.block.push(b as u32);
                 self.stamp.push(0);
-                self.acc.push([0.0; 3]);
-                self.cnt.push(0);
+                self.hot.push(Accum::default());
                 delta.new_slots += 1;
             }
-            let si = s as usize;
-            if self.stamp[si] != self.epoch {
-                self.stamp[si] = self.epoch;
-                delta.changed.push(s);
-                self.acc[si] = [0.0; 3];
-                self.cnt[si] = 0;
+            let h = &mut self.hot[s as usize];
+            if h.epoch != epoch {
+                *h = Accum { sum: [0.0; 3], count: 0, epoch };
+                blk.changed_bits[li >> 6] |= 1 << (li & 63);
             }
-            let a = &mut self.acc[si];
-            a[0] += p[0];
-            a[1] += p[1];
-            a[2] += p[2];
-            self.cnt[si] += 1;
+            h.sum[0] += p[0];
+            h.sum[1] += p[1];
+            h.sum[2] += p[2];
+            h.count += 1;
         }
-        // Spatial order (block, then voxel) for cache-friendly metric updates.
-        let (block, key) = (&self.block, &self.key);
-        delta.changed.sort_unstable_by_key(|&s| (block[s as usize], local_index(key[s as usize]) as u32, s));
+        // Spatial order (block, then voxel) for cache-friendly metric updates: the touched
+        // blocks by domain index, and each one's changed voxels by local index.
+        touched.sort_unstable();
         let first_new = self.pos.len() - delta.new_slots;
-        for &s in &delta.changed {
-            let si = s as usize;
-            let (a, n) = (self.acc[si], self.cnt[si] as f64);
-            self.pos[si] = if si >= first_new {
-                [a[0] / n, a[1] / n, a[2] / n]
-            } else {
-                let q = self.pos[si];
-                [(q[0] + a[0]) / (n + 1.0), (q[1] + a[1]) / (n + 1.0), (q[2] + a[2]) / (n + 1.0)]
-            };
-            let t = self.table[self.block[si] as usize];
-            if let Some(h) = self.blocks[t as usize].handle {
-                self.supergrid.grow(h, self.pos[si]);
+        for &(_, t) in &touched {
+            let blk = &self.blocks[t as usize];
+            for (w, &bits) in blk.changed_bits.iter().enumerate() {
+                let mut bits = bits;
+                while bits != 0 {
+                    let li = (w << 6) | bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    delta.changed.push(blk.cells[li]);
+                }
+            }
+            for &s in &delta.changed[delta.changed.len() - count_bits(&blk.changed_bits)..] {
+                let si = s as usize;
+                self.stamp[si] = epoch;
+                let (a, n) = (self.hot[si].sum, self.hot[si].count as f64);
+                self.pos[si] = if si >= first_new {
+                    [a[0] / n, a[1] / n, a[2] / n]
+                } else {
+                    let q = self.pos[si];
+                    [(q[0] + a[0]) / (n + 1.0), (q[1] + a[1]) / (n + 1.0), (q[2] + a[2]) / (n + 1.0)]
+                };
+                if let Some(h) = blk.handle {
+                    self.supergrid.grow(h, self.pos[si]);
+                }
             }
         }
         delta
+    }
+
+    /// The slots created or moved by the insertions after insertion `epoch` (0: every slot), in
+    /// the spatial order of [`FusionDelta::changed`] (block, then voxel).
+    pub fn changed_since(&self, epoch: u32) -> Vec<u32> {
+        let mut v: Vec<u32> = (0..self.len() as u32).filter(|&s| self.stamp[s as usize] > epoch).collect();
+        let (block, key) = (&self.block, &self.key);
+        v.sort_unstable_by_key(|&s| (block[s as usize], local_index(key[s as usize]) as u32, s));
+        v
     }
 
     /// The nearest fused point to `p` with squared distance below `bound2` (exact; ties →

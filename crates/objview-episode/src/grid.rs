@@ -3,6 +3,8 @@
 //! allocated on first use inside a fixed domain (the object's bounding box plus a margin).
 //! Lookups are two array reads, which keeps per-step fusion and nearest-neighbour updates cheap.
 
+use crate::fusion::FusedCloud;
+
 /// Fine voxels per block edge, as a shift (8 = 1 << 3).
 pub const BLOCK_SHIFT: i32 = 3;
 /// Fine voxels per block edge.
@@ -283,6 +285,174 @@ pub fn for_each_ring_block(c: [i32; 3], r: i32, mut f: impl FnMut([i32; 3])) {
             } else {
                 f([c[0] - r, c[1] + dy, c[2] + dz]);
                 f([c[0] + r, c[1] + dy, c[2] + dz]);
+            }
+        }
+    }
+}
+
+/// Squared distance between the boxes of two blocks (0 when they touch or overlap).
+pub(crate) fn block_box_dist2(d: &Domain, a: [i32; 3], b: [i32; 3]) -> f64 {
+    let e = d.h * BLOCK as f64;
+    let mut s = 0.0;
+    for ax in 0..3 {
+        let gap = ((a[ax] - b[ax]).abs() - 1).max(0) as f64 * e;
+        s += gap * gap;
+    }
+    s
+}
+
+/// Lanes of the vectorized nearest scan.
+pub(crate) const LANES: usize = 4;
+
+/// The slots changed by one insertion, grouped by block, with each group's box and its
+/// positions laid out for a vectorized nearest scan (the coverage updates' input).
+pub struct ChangedBlocks {
+    pub(crate) blocks: Vec<ChangedBlock>,
+    /// Slots by group, each group padded with NONE to whole lanes.
+    pub(crate) slots: Vec<u32>,
+    /// Their positions by coordinate (padding at +∞).
+    xyz: [Vec<f64>; 3],
+    /// Domain block index → index into `blocks`, or NONE.
+    pub(crate) lookup: Vec<u32>,
+}
+
+pub(crate) struct ChangedBlock {
+    pub(crate) key: [i32; 3],
+    pub(crate) range: (usize, usize),
+    /// The box of its changed slots' positions (a tighter bound than the block's cube).
+    pub(crate) aabb: Aabb,
+}
+
+impl ChangedBlocks {
+    /// Groups `changed` (slots of `fused`).
+    pub fn new(fused: &FusedCloud, changed: &[u32]) -> ChangedBlocks {
+        let mut g = ChangedBlocks {
+            blocks: Vec::new(),
+            slots: Vec::new(),
+            xyz: Default::default(),
+            lookup: Vec::new(),
+        };
+        g.rebuild(fused, changed);
+        g
+    }
+
+    /// Groups `changed` (slots of `fused`) again, reusing this value's buffers (an episode
+    /// keeps one: no large allocation per step).
+    pub fn rebuild(&mut self, fused: &FusedCloud, changed: &[u32]) {
+        let n = fused.domain.num_blocks();
+        if self.lookup.len() != n {
+            self.lookup = vec![NONE; n];
+        } else {
+            for g in &self.blocks {
+                if let Some(b) = fused.domain.block_index(g.key) {
+                    self.lookup[b] = NONE;
+                }
+            }
+        }
+        self.blocks.clear();
+        self.slots.clear();
+        self.xyz.iter_mut().for_each(Vec::clear);
+        let mut v: Vec<(u32, u32)> = changed.iter().map(|&s| (fused.block[s as usize], s)).collect();
+        // An insertion's delta is already by block (then voxel); anything else is sorted.
+        if v.windows(2).any(|w| w[0].0 > w[1].0) {
+            v.sort_unstable();
+        }
+        let (blocks, slots, xyz) = (&mut self.blocks, &mut self.slots, &mut self.xyz);
+        let mut i = 0;
+        while i < v.len() {
+            let b = v[i].0;
+            let start = slots.len();
+            let mut aabb = Aabb::EMPTY;
+            while i < v.len() && v[i].0 == b {
+                let q = fused.pos[v[i].1 as usize];
+                slots.push(v[i].1);
+                for (c, &x) in xyz.iter_mut().zip(&q) {
+                    c.push(x);
+                }
+                aabb.grow(q);
+                i += 1;
+            }
+            // Pad to whole lanes with points at infinity (never nearest).
+            while (slots.len() - start) % LANES != 0 {
+                slots.push(NONE);
+                for c in xyz.iter_mut() {
+                    c.push(f64::INFINITY);
+                }
+            }
+            blocks.push(ChangedBlock {
+                key: fused.domain.block_key(b as usize),
+                range: (start, slots.len()),
+                aabb,
+            });
+        }
+        for (gi, g) in self.blocks.iter().enumerate() {
+            if let Some(b) = fused.domain.block_index(g.key) {
+                self.lookup[b] = gi as u32;
+            }
+        }
+    }
+
+    /// The nearest changed slot of group `g` to `p`: (d², position in `slots`). The positions
+    /// are stored by coordinate and padded to whole lanes so that this loop vectorizes; ties
+    /// go to the earlier slot of the lane.
+    #[inline]
+    pub(crate) fn nearest_in_group(&self, g: &ChangedBlock, p: [f64; 3]) -> (f64, usize) {
+        let (lo, hi) = g.range;
+        let (xs, ys, zs) = (&self.xyz[0][lo..hi], &self.xyz[1][lo..hi], &self.xyz[2][lo..hi]);
+        let mut m = [f64::INFINITY; LANES];
+        let mut at = [0usize; LANES];
+        for (c, ((x, y), z)) in
+            xs.chunks_exact(LANES).zip(ys.chunks_exact(LANES)).zip(zs.chunks_exact(LANES)).enumerate()
+        {
+            for l in 0..LANES {
+                let dx = x[l] - p[0];
+                let dy = y[l] - p[1];
+                let dz = z[l] - p[2];
+                let d = dx * dx + dy * dy + dz * dz;
+                let better = d < m[l];
+                m[l] = if better { d } else { m[l] };
+                at[l] = if better { c * LANES + l } else { at[l] };
+            }
+        }
+        let mut best = (f64::INFINITY, lo);
+        for l in 0..LANES {
+            if m[l] < best.0 || (m[l] == best.0 && lo + at[l] < best.1) {
+                best = (m[l], lo + at[l]);
+            }
+        }
+        best
+    }
+
+    /// Groups whose block box is closer than √max_d2 to target block `tb`, with that lower
+    /// bound: by dense lookup of the blocks around `tb` when that is cheaper than a scan.
+    pub(crate) fn candidates(&self, domain: &Domain, tb: [i32; 3], max_d2: f64, out: &mut Vec<(f64, usize)>) {
+        let e = domain.h * BLOCK as f64;
+        let reach = if max_d2.is_finite() { (max_d2.sqrt() / e).ceil() as i64 + 1 } else { i64::MAX };
+        let side = reach.saturating_mul(2).saturating_add(1);
+        let volume = side.saturating_mul(side).saturating_mul(side);
+        if volume < self.blocks.len() as i64 {
+            let r = reach as i32;
+            for dz in -r..=r {
+                for dy in -r..=r {
+                    for dx in -r..=r {
+                        let b = [tb[0] + dx, tb[1] + dy, tb[2] + dz];
+                        let Some(bi) = domain.block_index(b) else { continue };
+                        let gi = self.lookup[bi];
+                        if gi != NONE {
+                            let lb = block_box_dist2(domain, tb, b);
+                            if lb < max_d2 {
+                                out.push((lb, gi as usize));
+                            }
+                        }
+                    }
+                }
+            }
+        } else {
+            for (gi, g) in self.blocks.iter().enumerate() {
+                let lb = block_box_dist2(domain, tb, g.key);
+                if lb < max_d2 {
+                    out.push((lb, gi));
+                }
             }
         }
     }

@@ -4,8 +4,9 @@
 //! - [`planner`] — the planner interface (observations, actions, feasibility queries).
 //! - [`path`] — path cost under the shell distance.
 //! - [`fusion`] — incremental voxel-centroid fusion, on the sparse block grid of [`grid`].
-//! - [`coverage`] — exact nearest-fused distances → SC@τ, NSC@τ and CD.
-//! - [`metrics`] — the scoring of each view: SC, NSC, CD, PC, MS, #Views, PR (a table of their
+//! - [`coverage`] — instantaneous bounded-radius coverage → SC@τ and NSC@τ of every step.
+//! - [`chamfer`] — exact nearest distances → CD at checkpoints (and the observable SC).
+//! - [`metrics`] — the scoring of each view: SC, NSC, PC, MS, #Views, PR, CD at checkpoints (a table of their
 //!   definitions, SPEC sections and functions).
 //! - [`reference`](mod@reference) — the observable reference (NSC's denominator), cached on disk.
 //! - [`stabilization`] — MS@δ.
@@ -23,6 +24,7 @@ pub mod planner;
 pub use planner::{
     episode_seed, Action, Environment, EpisodeContext, Observation, OracleAccess, Planner, PlannerError,
 };
+pub mod chamfer;
 pub mod coverage;
 pub mod engine;
 pub mod fusion;
@@ -37,7 +39,7 @@ pub mod stabilization;
 pub mod validate;
 pub mod vocab;
 
-pub use engine::{run_episode, scene_domain, Episode, MethodInfo, Scene, Terminal};
+pub use engine::{run_episode, scene_domain, Episode, FreshTargets, MethodInfo, Scene, Terminal};
 pub use reference::{observable_reference, Reference};
 pub use result::EpisodeResult;
 pub use scene::{load_scene, scene_from_parts, SceneSource};
@@ -59,7 +61,7 @@ pub enum EpisodeError {
     #[error("{0}: {1}")]
     Io(String, String),
     /// A number of the result is NaN or infinite (it would be written as `null`); the field's
-    /// path, e.g. `steps[0].cd`. The result is not written.
+    /// path, e.g. `checkpoints.terminal.cd`. The result is not written.
     #[error("the result has a non-finite number at `{0}`; it is not written")]
     NonFinite(String),
 }

@@ -4,22 +4,19 @@
 //!
 //! | Metric | Definition, as computed here | SPEC § | Function |
 //! |---|---|---|---|
-//! | SC@τ | Fraction of ground-truth points that have had a fused point at d² < τ² at this view or an earlier one (sticky coverage, see below) | §5 Metrics, SC@τ | [`sc`] |
+//! | SC@τ | Fraction of ground-truth points with a fused point at d² < τ² now, over the current fused cloud (instantaneous, as the reference implementation) | §5 Metrics, SC@τ | [`sc`] ([`crate::coverage`], updated by [`update_coverage`]) |
 //! | NSC@τ | The same fraction over the observable reference of (object, view space): the voxel-0.005 fused cloud of every feasible tammes-360 view ([`crate::reference`]) | §5 Metrics, NSC@τ | [`nsc`] |
-//! | CD | Mean nearest-neighbour d² ground truth → current fused cloud, plus mean d² fused → ground truth; ∞ while nothing is fused (units²) | §5 Metrics, CD | [`chamfer`] (distances kept by [`update_distances`] and [`record_fused_to_gt`]) |
+//! | CD | At checkpoints only: mean nearest-neighbour d² ground truth → fused cloud of the checkpoint's view, plus mean d² fused → ground truth (units²) | §5 Metrics, CD | [`chamfer`] ([`crate::chamfer`]) |
 //! | PC | Sum of shell distances ([`crate::path::pose_distance`]) between consecutive camera centres, from the start pose (normalized object units) | §5 Metrics, PC | [`path_cost`] |
 //! | MS@δ | n = δ-voxels occupied by the fused cloud; growth = (n − n_prev) / max(n_prev, 1); a view is stable when growth < 0.01; MS@δ triggers at the third stable view in a row and becomes the checkpoint `MS@δ` (never a stop) | §5 MS@δ | [`add_new_voxels`], [`stabilization_step`] ([`crate::stabilization`]) |
 //! | #Views | Views executed so far, the start view included | §5 Metrics, #Views | [`views`] |
 //! | PR | Seconds spent inside the planner (`reset` and every `act`), summed over the episode; 0 when timings are not recorded | §5 Metrics, PR | [`planning_runtime`] |
 //!
-//! Two choices the SPEC's wording leaves open, as the code makes them:
-//! - SC and NSC are *sticky*: a point counts as covered once it has been within τ at some view
-//!   of the episode ([`crate::coverage::Targets::coverage`]). A fused point is a voxel centroid
-//!   that drifts inside its voxel as views are added, so the instantaneous fraction can drop by a
-//!   few points out of 10⁵–10⁶ although the observations still cover them; sticky coverage never
-//!   decreases.
-//! - CD is computed after every view (the SPEC needs it at checkpoints), so every step records
-//!   it and every checkpoint copies its view's value.
+//! SPEC v3 (as the reference implementation): SC and NSC are instantaneous — a fused point is a
+//! voxel centroid that drifts inside its voxel as views are added, so a point within τ at one
+//! view can be just beyond τ at a later one and the fraction can drop by a few points out of
+//! 10⁵–10⁶ — and CD is evaluated only where a checkpoint is recorded (`K=5`, `MS@0.02`,
+//! `terminal`, …), so steps carry no `cd` ([`crate::result::StepMetrics`]).
 //!
 //! Per-τ values are keyed by [`tau_key`] (`"0.02"`).
 
@@ -27,8 +24,10 @@ use std::collections::BTreeMap;
 
 use objview_geom::Pose;
 
-use crate::coverage::Targets;
+use crate::chamfer::Targets;
+use crate::coverage::Coverage;
 use crate::fusion::FusedCloud;
+use crate::grid::ChangedBlocks;
 use crate::path::pose_distance;
 use crate::stabilization::Stabilization;
 use crate::vocab::{tau_key, CheckpointKey};
@@ -38,33 +37,16 @@ fn by_tau(taus: &[f64], values: Vec<f64>) -> BTreeMap<String, f64> {
     taus.iter().zip(values).map(|(&t, x)| (tau_key(t), x)).collect()
 }
 
-/// Updates the nearest-fused distances of the ground truth (`gt`: SC and CD) and of the
-/// observable reference (`reference`: NSC) after `fused` changed the slots `changed`; the two
-/// are independent and updated concurrently on the rayon pool (one after the other on a
-/// one-thread pool). Returns, per changed slot, its d² to the nearest ground-truth point (the
-/// fused → GT half of CD, for [`record_fused_to_gt`]).
-pub fn update_distances(
-    gt: &mut Targets,
-    reference: &mut Targets,
+/// Updates the instantaneous coverage of the ground truth (`gt`: SC) and of the observable
+/// reference (`reference`: NSC) after an insertion into `fused` changed the slots grouped in
+/// `groups`; the two are independent and updated concurrently on the rayon pool.
+pub fn update_coverage(
+    gt: &mut Coverage,
+    reference: &mut Coverage,
     fused: &FusedCloud,
-    changed: &[u32],
-) -> Vec<f64> {
-    let (to_gt, ()) = rayon::join(
-        || gt.update(fused, changed),
-        || {
-            reference.update(fused, changed);
-        },
-    );
-    to_gt
-}
-
-/// Keeps the fused → GT d² per fused slot (`slot_gt_d2`, grown to the `fused_len` slots): the
-/// changed slots get their new distances `to_gt` from [`update_distances`].
-pub fn record_fused_to_gt(slot_gt_d2: &mut Vec<f64>, fused_len: usize, changed: &[u32], to_gt: Vec<f64>) {
-    slot_gt_d2.resize(fused_len, 0.0);
-    for (&s, d) in changed.iter().zip(to_gt) {
-        slot_gt_d2[s as usize] = d;
-    }
+    groups: &ChangedBlocks,
+) {
+    rayon::join(|| gt.update(fused, groups), || reference.update(fused, groups));
 }
 
 /// Adds the fine voxels of the fused points created by the latest insertion (its last
@@ -100,27 +82,35 @@ pub fn planning_runtime(total: f64, seconds: f64, record_timings: bool) -> f64 {
     }
 }
 
-/// SC@τ for each τ of `taus`: the ground truth's sticky coverage. Call once per view, after
-/// [`update_distances`], always with the same τ list.
-pub fn sc(gt: &mut Targets, taus: &[f64]) -> BTreeMap<String, f64> {
-    by_tau(taus, gt.coverage(taus))
+/// SC@τ for each τ of `taus` (the list `gt` was built with): the ground truth's coverage now.
+pub fn sc(gt: &Coverage, taus: &[f64]) -> BTreeMap<String, f64> {
+    by_tau(taus, gt.fractions())
 }
 
-/// NSC@τ for each τ of `taus`: the observable reference's sticky coverage. Call once per view,
-/// after [`update_distances`], always with the same τ list.
-pub fn nsc(reference: &mut Targets, taus: &[f64]) -> BTreeMap<String, f64> {
-    by_tau(taus, reference.coverage(taus))
+/// NSC@τ for each τ of `taus` (the list `reference` was built with): the observable
+/// reference's coverage now.
+pub fn nsc(reference: &Coverage, taus: &[f64]) -> BTreeMap<String, f64> {
+    by_tau(taus, reference.fractions())
 }
 
-/// CD over the current fused cloud: the mean GT → fused d² (`gt`) plus the mean fused → GT d²
-/// (`slot_gt_d2`, one per fused slot, from [`record_fused_to_gt`]); ∞ while `fused` is empty.
-pub fn chamfer(gt: &Targets, fused: &FusedCloud, slot_gt_d2: &[f64]) -> f64 {
-    let fused_mean = if fused.is_empty() { 0.0 } else { slot_gt_d2.iter().sum::<f64>() / fused.len() as f64 };
-    if fused.is_empty() {
-        f64::INFINITY
-    } else {
-        gt.mean_d2() + fused_mean
+/// CD over the current fused cloud (at a checkpoint): brings the exact nearest distances of the
+/// ground truth (`gt`) and of every fused slot (`slot_gt_d2`) up to date with the slots changed
+/// since `fused` epoch `*seen` (then sets `*seen` to the current epoch), and returns the mean
+/// GT → fused d² plus the mean fused → GT d²; ∞ while `fused` is empty.
+pub fn chamfer(gt: &mut Targets, slot_gt_d2: &mut Vec<f64>, fused: &FusedCloud, seen: &mut u32) -> f64 {
+    let changed = fused.changed_since(*seen);
+    *seen = fused.epoch();
+    if !changed.is_empty() {
+        let to_gt = gt.update(fused, &changed);
+        slot_gt_d2.resize(fused.len(), 0.0);
+        for (&s, d) in changed.iter().zip(to_gt) {
+            slot_gt_d2[s as usize] = d;
+        }
     }
+    if fused.is_empty() {
+        return f64::INFINITY;
+    }
+    gt.mean_d2() + slot_gt_d2.iter().sum::<f64>() / fused.len() as f64
 }
 
 /// Ends view `step` for every MS@δ tracker (after [`add_new_voxels`]): the δ-voxel count per δ

@@ -72,8 +72,8 @@ pub struct OracleAccess {
     /// order: point i is bit i of [`Environment::oracle_covered`].
     pub reference: Arc<Vec<[f64; 3]>>,
     /// The same points with the environment's spatial index (for coverage queries such as
-    /// [`crate::coverage::Targets::mark_within`], whose bit order is this order).
-    pub reference_targets: Arc<crate::coverage::Targets>,
+    /// [`crate::chamfer::Targets::mark_within`], whose bit order is this order).
+    pub reference_targets: Arc<crate::chamfer::Targets>,
 }
 
 /// What a planner learns when an episode starts.

@@ -17,7 +17,7 @@ use objview_render::{Camera, Intrinsics, Renderer};
 use objview_views::{ViewSet, ViewSpace};
 use serde::{Deserialize, Serialize};
 
-use crate::coverage::Targets;
+use crate::chamfer::Targets;
 use crate::fusion::FusedCloud;
 use crate::grid::Domain;
 use crate::result::ReferenceInfo;

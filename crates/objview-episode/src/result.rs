@@ -14,24 +14,66 @@ use serde::{Deserialize, Serialize};
 
 use crate::vocab::{Budget, CheckpointKey, ExecutionMode, Family, TerminalSource};
 
-/// Metrics after one view (also the payload of a checkpoint).
+/// Metrics after one view, as every step records them: everything but CD, which is evaluated
+/// only at checkpoints ([`Metrics`]), as the reference implementation's evaluator does.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StepMetrics {
+    /// Views taken so far, start view included (#Views).
+    pub views: usize,
+    /// SC@τ: fraction of ground-truth points with a fused point closer than τ (d² < τ²) now,
+    /// over the current fused cloud ([`crate::coverage`]).
+    pub sc: BTreeMap<String, f64>,
+    /// NSC@τ: the same fraction over the observable-reference points.
+    pub nsc: BTreeMap<String, f64>,
+    /// Shell path length from the start pose (normalized object units).
+    pub path_cost: f64,
+    /// Planning runtime so far (PR), seconds spent inside the planner.
+    pub runtime: f64,
+}
+
+impl StepMetrics {
+    /// The checkpoint metrics of this view, with its Chamfer distance.
+    pub fn with_cd(&self, cd: f64) -> Metrics {
+        Metrics {
+            views: self.views,
+            sc: self.sc.clone(),
+            nsc: self.nsc.clone(),
+            cd,
+            path_cost: self.path_cost,
+            runtime: self.runtime,
+        }
+    }
+}
+
+/// Metrics of a checkpoint: a step's [`StepMetrics`] plus CD.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Metrics {
     /// Views taken so far, start view included (#Views).
     pub views: usize,
-    /// SC@τ: fraction of ground-truth points that have had a fused point closer than τ
-    /// (d² < τ²) at this view or an earlier one — sticky coverage, see
-    /// [`crate::coverage::Targets::coverage`].
+    /// SC@τ: fraction of ground-truth points with a fused point closer than τ (d² < τ²) now.
     pub sc: BTreeMap<String, f64>,
-    /// NSC@τ: the same sticky fraction over the observable-reference points.
+    /// NSC@τ: the same fraction over the observable-reference points.
     pub nsc: BTreeMap<String, f64>,
-    /// Chamfer distance: mean squared NN distance GT→fused plus fused→GT over the current
-    /// fused cloud (units²).
+    /// Chamfer distance: mean squared NN distance GT→fused plus fused→GT over the fused cloud
+    /// of the checkpoint's view (units²; [`crate::chamfer`]).
     pub cd: f64,
     /// Shell path length from the start pose (normalized object units).
     pub path_cost: f64,
     /// Planning runtime so far (PR), seconds spent inside the planner.
     pub runtime: f64,
+}
+
+impl Metrics {
+    /// The same metrics without CD.
+    pub fn without_cd(&self) -> StepMetrics {
+        StepMetrics {
+            views: self.views,
+            sc: self.sc.clone(),
+            nsc: self.nsc.clone(),
+            path_cost: self.path_cost,
+            runtime: self.runtime,
+        }
+    }
 }
 
 /// One executed view and its metrics.
@@ -41,9 +83,10 @@ pub struct Step {
     pub step: usize,
     /// The executed pose `[cx, cy, cz, lx, ly, lz, roll]`.
     pub pose: [f64; 7],
-    /// The metrics after this view (flattened into the step's JSON object).
+    /// The metrics after this view (flattened into the step's JSON object; no `cd`: CD is
+    /// evaluated at checkpoints only).
     #[serde(flatten)]
-    pub metrics: Metrics,
+    pub metrics: StepMetrics,
     /// Fused points (voxel 0.005 centroids).
     pub fused_points: usize,
     /// Voxel counts of the fused cloud at each MS resolution δ (keys as τ).
@@ -52,9 +95,9 @@ pub struct Step {
     pub planner_seconds: f64,
     /// Environment time for this view: render + fusion + metrics (seconds).
     pub engine_seconds: f64,
-    /// `engine_seconds` by stage: render, fusion, nearest-fused distances of the ground truth
-    /// (SC, CD) and of the observable reference (NSC) — updated concurrently —, the rest
-    /// (coverage counts, MS, bookkeeping).
+    /// `engine_seconds` by stage: render, fusion, coverage of the ground truth (SC) and of the
+    /// observable reference (NSC) — updated concurrently —, the rest (CD when a checkpoint is
+    /// recorded at this view, MS, bookkeeping).
     pub stage_seconds: [f64; 4],
 }
 
@@ -135,7 +178,7 @@ pub struct EpisodeResult {
 }
 
 impl EpisodeResult {
-    /// The path of the first number that is NaN or infinite (`steps[0].cd`,
+    /// The path of the first number that is NaN or infinite (`checkpoints.terminal.cd`,
     /// `checkpoints.terminal.path_cost`, …), or `None` when every number is finite. JSON has no
     /// such numbers (they serialize as `null`), and a reader of results expects a number, so a
     /// result with one must take the error path instead of being written.
@@ -147,9 +190,13 @@ impl EpisodeResult {
             m.iter().find(|(_, x)| !x.is_finite()).map(|(k, _)| format!("{prefix}.{k}"))
         }
         fn metrics(prefix: &str, m: &Metrics) -> Option<String> {
+            step_metrics(prefix, &m.without_cd())
+                .or_else(|| (!m.cd.is_finite()).then(|| format!("{prefix}.cd")))
+        }
+        fn step_metrics(prefix: &str, m: &StepMetrics) -> Option<String> {
             map(&format!("{prefix}.sc"), &m.sc).or_else(|| map(&format!("{prefix}.nsc"), &m.nsc)).or_else(
                 || {
-                    [("cd", m.cd), ("path_cost", m.path_cost), ("runtime", m.runtime)]
+                    [("path_cost", m.path_cost), ("runtime", m.runtime)]
                         .into_iter()
                         .find(|(_, x)| !x.is_finite())
                         .map(|(k, _)| format!("{prefix}.{k}"))
@@ -167,7 +214,7 @@ impl EpisodeResult {
         for (i, s) in self.steps.iter().enumerate() {
             let at = format!("steps[{i}]");
             let found = all(&format!("{at}.pose"), &s.pose)
-                .or_else(|| metrics(&at, &s.metrics))
+                .or_else(|| step_metrics(&at, &s.metrics))
                 .or_else(|| all(&format!("{at}.stage_seconds"), &s.stage_seconds))
                 .or_else(|| {
                     [("planner_seconds", s.planner_seconds), ("engine_seconds", s.engine_seconds)]
@@ -204,7 +251,7 @@ mod tests {
         let step = Step {
             step: 0,
             pose: [3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-            metrics: metrics(cd),
+            metrics: metrics(cd).without_cd(),
             fused_points: 1,
             ms_voxels: BTreeMap::new(),
             planner_seconds: 0.0,
@@ -251,7 +298,7 @@ mod tests {
 
     #[test]
     fn the_first_non_finite_number_is_named_by_its_path() {
-        assert_eq!(result(f64::INFINITY).non_finite().as_deref(), Some("steps[0].cd"));
+        assert_eq!(result(f64::INFINITY).non_finite().as_deref(), Some("checkpoints.terminal.cd"));
         let mut r = result(0.1);
         r.checkpoints.get_mut(&CheckpointKey::Terminal).unwrap().metrics.path_cost = f64::NAN;
         assert_eq!(r.non_finite().as_deref(), Some("checkpoints.terminal.path_cost"));
@@ -263,5 +310,13 @@ mod tests {
         // Written as JSON, such a number would be a null.
         let line = serde_json::to_string(&result(f64::INFINITY)).unwrap();
         assert!(line.contains("\"cd\":null"), "{line}");
+    }
+
+    #[test]
+    fn steps_carry_no_cd_and_checkpoints_do() {
+        let v = serde_json::to_value(result(0.25)).unwrap();
+        assert!(v["steps"][0].get("cd").is_none(), "{}", v["steps"][0]);
+        assert_eq!(v["steps"][0]["sc"]["0.02"], 0.5);
+        assert_eq!(v["checkpoints"]["terminal"]["cd"], 0.25);
     }
 }

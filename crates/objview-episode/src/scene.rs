@@ -81,5 +81,6 @@ pub fn scene_from_parts(
         domain,
         intrinsics,
         targets: std::sync::OnceLock::new(),
+        reference_targets: std::sync::OnceLock::new(),
     })
 }

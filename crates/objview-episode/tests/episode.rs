@@ -1,6 +1,6 @@
 //! End-to-end episodes on an analytic scene (a unit sphere, and a cube), driven by scripted
 //! planners: terminal reasons, invalid actions, budgets, the cap, `enough_info`, MS
-//! checkpoints, the NSC = 1 invariant, monotone coverage and determinism.
+//! checkpoints, the NSC = 1 invariant, near-monotone coverage and determinism.
 
 use std::sync::{Arc, OnceLock};
 
@@ -79,7 +79,7 @@ fn nsc(r: &EpisodeResult, cp: &str, tau: &str) -> f64 {
 }
 
 #[test]
-fn all_feasible_reference_views_give_nsc_one_and_coverage_never_decreases() {
+fn all_feasible_reference_views_give_nsc_one_and_coverage_dips_at_most_a_little() {
     for space in ["whole", "quarter"] {
         let sc = scene_of(space, true);
         let poses: Vec<Action> = sc.reference.poses.iter().map(Action::move_to).collect();
@@ -97,14 +97,16 @@ fn all_feasible_reference_views_give_nsc_one_and_coverage_never_decreases() {
         // The reference's own SC (observable surface ratio) is what the episode reaches.
         let obs = r.reference.observable_sc["0.02"];
         assert!((obs - sc_end).abs() < 0.002, "{space}: observable SC {obs} vs episode SC {sc_end}");
+        // Coverage is instantaneous (SPEC v3): a centroid drifting inside its voxel can move
+        // away from a point, so a fraction may dip — by a few points, never more.
         for w in r.steps.windows(2) {
             for tau in ["0.01", "0.02", "0.03"] {
-                assert!(w[1].metrics.sc[tau] >= w[0].metrics.sc[tau], "SC decreased at step {}", w[1].step);
-                assert!(
-                    w[1].metrics.nsc[tau] >= w[0].metrics.nsc[tau],
-                    "NSC decreased at step {}",
-                    w[1].step
-                );
+                for (name, a, b) in [
+                    ("SC", w[0].metrics.sc[tau], w[1].metrics.sc[tau]),
+                    ("NSC", w[0].metrics.nsc[tau], w[1].metrics.nsc[tau]),
+                ] {
+                    assert!(b >= a - 1e-3, "{name}@{tau} fell from {a} to {b} at step {}", w[1].step);
+                }
             }
             assert!(w[1].metrics.path_cost >= w[0].metrics.path_cost);
         }

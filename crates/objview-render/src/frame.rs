@@ -44,14 +44,20 @@ impl Frame {
     /// The observed point cloud: every pixel with a hit, back-projected at its pixel centre
     /// with its depth, in the object frame; row-major pixel order.
     pub fn observed_points(&self) -> Vec<[f64; 3]> {
-        let w = self.width();
         let mut out = Vec::with_capacity(self.num_hits());
+        self.observed_points_into(&mut out);
+        out
+    }
+
+    /// [`Frame::observed_points`] into `out` (cleared first; its buffer is reused).
+    pub fn observed_points_into(&self, out: &mut Vec<[f64; 3]>) {
+        out.clear();
+        let w = self.width();
         for (i, (&z, &t)) in self.depth.iter().zip(&self.triangle).enumerate() {
             if t != NO_HIT {
                 let (u, v) = (i as u32 % w, i as u32 / w);
                 out.push(self.camera.unproject(u, v, z as f64));
             }
         }
-        out
     }
 }

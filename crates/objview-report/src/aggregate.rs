@@ -98,7 +98,7 @@ pub struct Aggregate {
 }
 
 /// One metric of a pick. The τ keys were checked when loading.
-fn tau_value(map: &BTreeMap<String, f64>, tau: &str) -> f64 {
+pub fn tau_value(map: &BTreeMap<String, f64>, tau: &str) -> f64 {
     map.get(tau).copied().unwrap_or(f64::NAN)
 }
 
@@ -120,7 +120,7 @@ pub fn sc(m: &Metrics, tau: &str) -> f64 {
 
 /// The aggregate of one non-empty group; `taus` are the τ keys of the per-τ columns.
 pub fn aggregate(key: &GroupKey, picks: &[Pick], tau: &str, taus: &[String]) -> Aggregate {
-    let metrics: Vec<&Metrics> = picks.iter().map(|p| p.metrics).collect();
+    let metrics: Vec<&Metrics> = picks.iter().map(|p| p.metrics.as_ref()).collect();
     let first = &picks[0].episode;
     let objects: BTreeSet<&str> = picks.iter().map(|p| p.episode.result.uid.as_str()).collect();
     let count = |s: PickSource| picks.iter().filter(|p| p.source == s).count();
@@ -140,6 +140,8 @@ pub fn aggregate(key: &GroupKey, picks: &[Pick], tau: &str, taus: &[String]) -> 
         views: stat_of(&metrics, |m| m.views as f64),
         nsc: stat_of(&metrics, |m| nsc(m, tau)),
         sc: stat_of(&metrics, |m| sc(m, tau)),
+        // CD exists at checkpoints only: a pick read off a step has none, and then the
+        // group's CD is unknown (NaN: an empty cell), never a mean over part of it.
         cd: stat_of(&metrics, |m| m.cd),
         path_cost: stat_of(&metrics, |m| m.path_cost),
         runtime: stat_of(&metrics, |m| m.runtime),

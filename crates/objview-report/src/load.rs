@@ -446,11 +446,13 @@ fn check(result: EpisodeResult, source: Source, tau: &str) -> Result<Episode, St
     if !result.checkpoints.contains_key(&CheckpointKey::Terminal) {
         return Err("no `terminal` checkpoint".into());
     }
-    let has = |m: &objview_episode::result::Metrics| m.nsc.contains_key(tau) && m.sc.contains_key(tau);
-    if let Some((name, _)) = result.checkpoints.iter().find(|(_, c)| !has(&c.metrics)) {
+    let has = |nsc: &BTreeMap<String, f64>, sc: &BTreeMap<String, f64>| {
+        nsc.contains_key(tau) && sc.contains_key(tau)
+    };
+    if let Some((name, _)) = result.checkpoints.iter().find(|(_, c)| !has(&c.metrics.nsc, &c.metrics.sc)) {
         return Err(format!("checkpoint `{name}` has no NSC@{tau} or SC@{tau}"));
     }
-    if let Some(s) = result.steps.iter().find(|s| !has(&s.metrics)) {
+    if let Some(s) = result.steps.iter().find(|s| !has(&s.metrics.nsc, &s.metrics.sc)) {
         return Err(format!("step {} has no NSC@{tau} or SC@{tau}", s.step));
     }
     Ok(Episode { source, result })
@@ -547,14 +549,14 @@ fn deduplicate(raw: Vec<Episode>) -> (Vec<Episode>, Vec<Duplicate>) {
 fn common_taus(episodes: &[Episode]) -> Vec<String> {
     let mut common: Option<BTreeSet<String>> = None;
     for e in episodes {
-        let metrics = e
+        let maps = e
             .result
             .checkpoints
             .values()
-            .map(|c| &c.metrics)
-            .chain(e.result.steps.iter().map(|s| &s.metrics));
-        for m in metrics {
-            let here: BTreeSet<String> = m.nsc.keys().filter(|k| m.sc.contains_key(*k)).cloned().collect();
+            .map(|c| (&c.metrics.nsc, &c.metrics.sc))
+            .chain(e.result.steps.iter().map(|s| (&s.metrics.nsc, &s.metrics.sc)));
+        for (nsc, sc) in maps {
+            let here: BTreeSet<String> = nsc.keys().filter(|k| sc.contains_key(*k)).cloned().collect();
             common = Some(match common {
                 None => here,
                 Some(c) => c.intersection(&here).cloned().collect(),

@@ -17,7 +17,7 @@ use objview_plot::{palette, Axis, Chart, Figure, Marker, RefLine, Rgb, Series};
 use serde::Serialize;
 use serde_json::{json, Value};
 
-use crate::aggregate::{nsc, Aggregate};
+use crate::aggregate::{tau_value, Aggregate};
 use crate::format::file_safe;
 use crate::load::Episode;
 use crate::select::Setting;
@@ -95,7 +95,7 @@ fn episode_series(e: &Episode, tau: &str) -> Option<(usize, Vec<f64>)> {
         if v < first + values.len() {
             // Not increasing (never expected): the latest value at that count wins.
             if let Some(slot) = v.checked_sub(first).and_then(|i| values.get_mut(i)) {
-                *slot = nsc(&s.metrics, tau);
+                *slot = tau_value(&s.metrics.nsc, tau);
             }
             continue;
         }
@@ -103,7 +103,7 @@ fn episode_series(e: &Episode, tau: &str) -> Option<(usize, Vec<f64>)> {
         while first + values.len() < v {
             values.push(carry.unwrap_or(f64::NAN));
         }
-        values.push(nsc(&s.metrics, tau));
+        values.push(tau_value(&s.metrics.nsc, tau));
     }
     Some((first, values))
 }

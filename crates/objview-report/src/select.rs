@@ -4,13 +4,15 @@
 //! finite-plan episode was run with. Which metrics an episode contributes to a setting depends
 //! on its execution mode:
 //! - iterative planners run once and serve every setting: `K=k` → checkpoint `K=k`; when the run
-//!   has no such checkpoint, its step `k` (for a K the runner does not checkpoint) or, when it
+//!   has no such checkpoint, its step `k` (for a K the runner does not checkpoint; a step has no
+//!   CD, so that pick's CD is NaN and its group's CD cell stays empty) or, when it
 //!   ended before k planner views, `terminal`; `Automatic` → the MS checkpoint (`MS@0.02`), else
 //!   `terminal` (MS never triggered before the run ended);
 //! - budgeted plans: `K=k` ← their `budget == "k"` episodes at `terminal`; no `Automatic`;
 //! - set-cover plans: `Automatic` ← their `budget == "auto"` episodes at `terminal`; `K=k` ← their
 //!   `budget == "k"` episodes at `terminal` when there are any.
 
+use std::borrow::Cow;
 use std::fmt;
 
 use objview_episode::result::{EpisodeResult, Metrics};
@@ -94,8 +96,8 @@ pub enum PickSource {
 pub struct Pick<'a> {
     /// The contributing episode.
     pub episode: &'a Episode,
-    /// Its metrics at the chosen checkpoint or step.
-    pub metrics: &'a Metrics,
+    /// Its metrics at the chosen checkpoint, or at the chosen step with CD NaN.
+    pub metrics: Cow<'a, Metrics>,
     /// Where the metrics came from.
     pub source: PickSource,
 }
@@ -108,14 +110,19 @@ fn terminal(r: &EpisodeResult) -> Option<&Metrics> {
 /// `auto_checkpoint` is the MS checkpoint of the automatic setting (`MS@0.02`).
 pub fn pick<'a>(episode: &'a Episode, setting: Setting, auto_checkpoint: &CheckpointKey) -> Option<Pick<'a>> {
     let r = &episode.result;
-    let found = |metrics, source| Some(Pick { episode, metrics, source });
+    let found =
+        |metrics: &'a Metrics, source| Some(Pick { episode, metrics: Cow::Borrowed(metrics), source });
     match (r.execution_mode, setting) {
         (ExecutionMode::Iterative, Setting::Fixed(k)) => {
             if let Some(c) = r.checkpoints.get(&CheckpointKey::Budget(k)) {
                 return found(&c.metrics, PickSource::Checkpoint);
             }
             if let Some(s) = r.steps.iter().find(|s| s.step == k) {
-                return found(&s.metrics, PickSource::Step);
+                return Some(Pick {
+                    episode,
+                    metrics: Cow::Owned(s.metrics.with_cd(f64::NAN)),
+                    source: PickSource::Step,
+                });
             }
             found(terminal(r)?, PickSource::TerminalFallback)
         }

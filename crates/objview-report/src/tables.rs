@@ -210,8 +210,8 @@ fn view_quality(picks: &[&Pick], tau: &str) -> (usize, f64, f64, f64) {
     (
         picks.len(),
         mean(&|p| p.metrics.views as f64),
-        mean(&|p| nsc(p.metrics, tau)),
-        mean(&|p| sc(p.metrics, tau)),
+        mean(&|p| nsc(&p.metrics, tau)),
+        mean(&|p| sc(&p.metrics, tau)),
     )
 }
 

@@ -78,7 +78,7 @@ impl Spec {
             .map(|s| Step {
                 step: s,
                 pose,
-                metrics: self.metrics(s),
+                metrics: self.metrics(s).without_cd(),
                 fused_points: 100 * (s + 1),
                 ms_voxels: BTreeMap::new(),
                 planner_seconds: self.step_time,

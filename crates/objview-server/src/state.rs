@@ -756,7 +756,7 @@ impl axum::extract::FromRequestParts<Arc<AppState>> for Caller {
 mod tests {
     use super::*;
 
-    /// A one-view result with step 0's CD = `cd`.
+    /// A one-view result whose terminal checkpoint has CD = `cd`.
     fn one_view_result(cd: f64) -> objview_episode::EpisodeResult {
         let m = json!({"views": 1, "sc": {"0.02": 0.5}, "nsc": {"0.02": 0.5}, "cd": 0.1, "path_cost": 0.0,
                        "runtime": 0.0});
@@ -779,7 +779,7 @@ mod tests {
             "gt_points": 1, "gt_source": "sampled", "wall_seconds": 0.0
         }))
         .unwrap();
-        r.steps[0].metrics.cd = cd;
+        r.checkpoints.get_mut(&objview_episode::CheckpointKey::Terminal).unwrap().metrics.cd = cd;
         r
     }
 
@@ -795,7 +795,7 @@ mod tests {
         let line = result_line("e-1", &one_view_result(f64::INFINITY));
         assert!(!line.contains("null"), "{line}");
         let v: Value = serde_json::from_str(&line).unwrap();
-        assert!(v["error"].as_str().unwrap().contains("`steps[0].cd`"), "{v}");
+        assert!(v["error"].as_str().unwrap().contains("`checkpoints.terminal.cd`"), "{v}");
         assert_eq!(
             (v["uid"].as_str(), v["method"].as_str(), v["budget"].as_str()),
             (Some("cube"), Some("m"), Some("auto"))

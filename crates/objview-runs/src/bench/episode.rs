@@ -1,5 +1,5 @@
 //! `objview bench episode`: the cost of one episode step in the environment — render + fusion +
-//! SC/NSC/CD at 3 τ + MS — on a built-in object tessellated to a given triangle count with a
+//! SC/NSC at 3 τ + MS, and CD where a checkpoint is recorded — on a built-in object tessellated to a given triangle count with a
 //! sampled ground-truth cloud, and the planning time per step of RSE / RSE-Mov on the same
 //! object.
 //!
@@ -54,17 +54,18 @@ impl Default for EpisodeBenchSettings {
     }
 }
 
-/// Median seconds per engine stage of the one-thread episode.
+/// Median seconds per engine stage of the one-thread episode, over the views without a
+/// checkpoint.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StageMedians {
     /// Depth rendering.
     pub render: f64,
     /// Fusion of the frame into the reconstruction.
     pub fusion: f64,
-    /// Nearest-fused distances of the ground truth (SC, CD) and the reference (NSC).
-    pub distances: f64,
-    /// Coverage counts and MS.
-    pub coverage_ms: f64,
+    /// Coverage of the ground truth (SC) and of the reference (NSC) at every τ.
+    pub coverage: f64,
+    /// MS and bookkeeping.
+    pub rest: f64,
 }
 
 /// Planning time per step of one planner (its first step, from the start pose, left out).
@@ -93,10 +94,16 @@ pub struct EpisodeBenchReport {
     pub reference_views: usize,
     /// Time to build the scene (mostly the observable reference).
     pub reference_seconds: f64,
-    /// Engine seconds per step of the one-thread episode, in step order.
+    /// Engine seconds per step of the one-thread episode, in step order (CD included at the
+    /// views with a checkpoint).
     pub engine_step_seconds: Vec<f64>,
-    /// Their spread.
+    /// Their spread over the views without a checkpoint: the step cost.
     pub engine: Spread,
+    /// The last stage (MS, bookkeeping and CD) at the views with a checkpoint: the cost of a
+    /// checkpoint's CD, over how many views.
+    pub checkpoint_cd: Spread,
+    /// Views with a checkpoint.
+    pub checkpoint_views: usize,
     /// Their median after the first 5 views (NaN when there are no more).
     pub engine_median_after_5: f64,
     /// Wall time of the one-thread episode.
@@ -139,10 +146,12 @@ impl EpisodeBenchReport {
             "engine_step_seconds": self.engine_step_seconds,
             "engine_median_s": self.engine.median,
             "engine_p90_s": self.engine.p90,
+            "checkpoint_cd": {"views": self.checkpoint_views, "median_s": self.checkpoint_cd.median,
+                              "max_s": self.checkpoint_cd.max},
             "engine_all_threads": {"threads": self.threads, "median_s": self.engine_all_threads.median,
                                    "p90_s": self.engine_all_threads.p90},
             "stage_median_s": {"render": self.stages.render, "fusion": self.stages.fusion,
-                               "distances": self.stages.distances, "coverage_ms": self.stages.coverage_ms},
+                               "coverage": self.stages.coverage, "rest": self.stages.rest},
             "planners": planners,
         })
     }
@@ -200,15 +209,34 @@ pub fn bench_episode(
     };
     let (r, engine_episode_seconds) = engine_run(1)?;
     let engine_step_seconds: Vec<f64> = r.steps.iter().map(|s| s.engine_seconds).collect();
-    let engine = Spread::of(engine_step_seconds.clone());
-    let engine_median_after_5 = Spread::of(engine_step_seconds.iter().skip(5).copied().collect()).median;
+    let at_checkpoint: std::collections::BTreeSet<usize> = r.checkpoints.values().map(|c| c.step).collect();
+    let plain = |r: &EpisodeResult| -> Vec<f64> {
+        r.steps.iter().filter(|s| !at_checkpoint.contains(&s.step)).map(|s| s.engine_seconds).collect()
+    };
+    let engine = Spread::of(plain(&r));
+    let engine_median_after_5 = Spread::of(
+        r.steps
+            .iter()
+            .skip(5)
+            .filter(|s| !at_checkpoint.contains(&s.step))
+            .map(|s| s.engine_seconds)
+            .collect(),
+    )
+    .median;
+    let checkpoint_cd = Spread::of(
+        r.steps.iter().filter(|s| at_checkpoint.contains(&s.step)).map(|s| s.stage_seconds[3]).collect(),
+    );
     // The far-target updates run on the rayon pool: the same episode on every thread.
     let threads = rayon::current_num_threads();
     let (r_all, engine_all_threads_episode_seconds) = engine_run(threads)?;
-    let engine_all_threads = Spread::of(r_all.steps.iter().map(|s| s.engine_seconds).collect());
-    let stage = |i: usize| Spread::of(r.steps.iter().map(|s| s.stage_seconds[i]).collect()).median;
-    let stages =
-        StageMedians { render: stage(0), fusion: stage(1), distances: stage(2), coverage_ms: stage(3) };
+    let engine_all_threads = Spread::of(plain(&r_all));
+    let stage = |i: usize| {
+        Spread::of(
+            r.steps.iter().filter(|s| !at_checkpoint.contains(&s.step)).map(|s| s.stage_seconds[i]).collect(),
+        )
+        .median
+    };
+    let stages = StageMedians { render: stage(0), fusion: stage(1), coverage: stage(2), rest: stage(3) };
     let mut timings = Vec::new();
     if settings.planner_steps > 0 {
         for name in TIMED_PLANNERS {
@@ -241,6 +269,8 @@ pub fn bench_episode(
         reference_seconds,
         engine_step_seconds,
         engine,
+        checkpoint_views: at_checkpoint.len(),
+        checkpoint_cd,
         engine_median_after_5,
         engine_episode_seconds,
         threads,

@@ -1,0 +1,633 @@
+//! Exact nearest distances between a fixed point set and the fused cloud: the ground truth's
+//! for CD at checkpoints (SPEC §5: CD is evaluated only where a checkpoint is recorded, as the
+//! reference implementation's evaluator does), and the observable reference's SC. SC@τ/NSC@τ of
+//! every step need only bounded-radius coverage: [`crate::coverage`].
+//!
+//! Each target point keeps d² to its nearest fused point and that point's slot. An update
+//! brings the distances from the fused cloud as it was at the previous update to the cloud now;
+//! only slots created or moved since then (the *changed* slots, [`FusedCloud::stamp`] later
+//! than the previous update's epoch) can change a distance:
+//! - *push*: every changed slot updates the targets in the 27 fine voxels around it; a target
+//!   whose nearest slot moved away is recomputed. This is exact for every target whose
+//!   distance was ≤ h (any point closer than h lies in those 27 voxels).
+//! - *far* targets (distance > h, or none yet): the minimum with the changed slots, found
+//!   block by block with box pruning. When a far target's nearest slot moved, every unchanged
+//!   slot is still at least its previous distance away, so the minimum over the changed slots
+//!   is the answer whenever it is no larger than that; otherwise (and for near targets whose
+//!   slot moved away) a full nearest search runs, bounded by the moved slot's new distance.
+//!
+//! With a cap, distances at or above the cap are stored as +∞ and searches are bounded by it.
+
+use crate::fusion::FusedCloud;
+use crate::grid::{
+    block_of, dist2, local_index, nearest_in, Bucketed, ChangedBlocks, Domain, SuperGrid, BLOCK, BLOCK_CELLS,
+    NONE,
+};
+use rayon::prelude::*;
+
+/// The immutable spatial index of a target set, shared (behind an `Arc`) by every episode
+/// on the same scene: building it sorts every point, which is most of an episode's set-up.
+#[derive(Debug)]
+struct TargetIndex {
+    domain: Domain,
+    /// Points sorted by (block, fine voxel).
+    pts: Vec<[f64; 3]>,
+    /// Domain block → index into `cell_start` (or NONE).
+    table: Vec<u32>,
+    /// Per target block: start offsets of its 512 voxels into `pts` (513 entries).
+    cell_start: Vec<[u32; BLOCK_CELLS + 1]>,
+    /// The target blocks by superblock (far nearest searches).
+    supergrid: SuperGrid,
+}
+
+impl TargetIndex {
+    /// Calls `f(target block, first, end)` with the index range of the targets in the fine
+    /// voxels within `r` (per axis) of voxel `k`: runs of consecutive voxels along x within one
+    /// block, which are contiguous in the sorted points.
+    #[inline]
+    fn for_runs_around(&self, k: [i32; 3], r: i32, mut f: impl FnMut(u32, u32, u32)) {
+        for dz in -r..=r {
+            for dy in -r..=r {
+                let mut dx = -r;
+                while dx <= r {
+                    let kk = [k[0] + dx, k[1] + dy, k[2] + dz];
+                    let run_end = (dx + (BLOCK - 1 - (kk[0] & (BLOCK - 1)))).min(r);
+                    let len = (run_end - dx + 1) as usize;
+                    dx = run_end + 1;
+                    let Some(b) = self.domain.block_index(block_of(kk)) else { continue };
+                    let t = self.table[b];
+                    if t == NONE {
+                        continue;
+                    }
+                    let starts = &self.cell_start[t as usize];
+                    let li = local_index(kk);
+                    f(t, starts[li], starts[li + len]);
+                }
+            }
+        }
+    }
+}
+
+/// A fixed point set with its nearest-fused distances. Cloning a fresh set (before its first
+/// update) is the cheap way to start another episode on the same points: the index is shared.
+#[derive(Debug, Clone)]
+pub struct Targets {
+    ix: std::sync::Arc<TargetIndex>,
+    /// Nearest-fused d² (∞: none, or ≥ cap).
+    pub d2: Vec<f64>,
+    /// Nearest slot, or NONE.
+    nn: Vec<u32>,
+    /// Targets with d² > h² at the start of the next update.
+    far: Vec<u32>,
+    cap2: f64,
+    mark: Vec<u32>,
+    epoch: u32,
+    /// The fused cloud's epoch at the previous update: slots stamped later have changed since.
+    seen: u32,
+}
+
+impl Targets {
+    /// Indexes `points` in `domain` (points outside the domain are an error naming how many).
+    /// `cap`: distances at or above it are only known to be "≥ cap" (∞ for exact distances).
+    pub fn new(domain: Domain, points: &[[f64; 3]], cap: f64) -> Result<Targets, String> {
+        let mut keyed: Vec<(u32, u32, usize)> = Vec::with_capacity(points.len());
+        let mut outside = 0usize;
+        for (i, &p) in points.iter().enumerate() {
+            let k = domain.key(p);
+            match domain.block_index(block_of(k)) {
+                Some(b) => keyed.push((b as u32, local_index(k) as u32, i)),
+                None => outside += 1,
+            }
+        }
+        if outside > 0 {
+            return Err(format!("{outside} target points lie outside the metric domain"));
+        }
+        keyed.sort_unstable();
+        let mut table = vec![NONE; domain.num_blocks()];
+        let mut cell_start: Vec<[u32; BLOCK_CELLS + 1]> = Vec::new();
+        let mut supergrid = SuperGrid::new(&domain);
+        let mut pts = Vec::with_capacity(keyed.len());
+        let mut i = 0;
+        while i < keyed.len() {
+            let b = keyed[i].0;
+            let mut starts = [0u32; BLOCK_CELLS + 1];
+            let mut j = i;
+            for (c, start) in starts.iter_mut().enumerate().take(BLOCK_CELLS) {
+                *start = (i + (j - i)) as u32;
+                while j < keyed.len() && keyed[j].0 == b && keyed[j].1 as usize == c {
+                    pts.push(points[keyed[j].2]);
+                    j += 1;
+                }
+            }
+            starts[BLOCK_CELLS] = j as u32;
+            table[b as usize] = cell_start.len() as u32;
+            cell_start.push(starts);
+            if let Some(h) = supergrid.add_block(domain.block_key(b as usize)) {
+                for &p in &pts[starts[0] as usize..j] {
+                    supergrid.grow(h, p);
+                }
+            }
+            i = j;
+        }
+        let n = pts.len();
+        Ok(Targets {
+            ix: std::sync::Arc::new(TargetIndex { domain, pts, table, cell_start, supergrid }),
+            d2: vec![f64::INFINITY; n],
+            nn: vec![NONE; n],
+            far: (0..n as u32).collect(),
+            cap2: cap * cap,
+            mark: vec![0; n],
+            epoch: 0,
+            seen: 0,
+        })
+    }
+
+    /// Forgets every distance (as before the first update).
+    pub fn reset(&mut self) {
+        self.d2.iter_mut().for_each(|d| *d = f64::INFINITY);
+        self.nn.iter_mut().for_each(|n| *n = NONE);
+        self.far = (0..self.ix.pts.len() as u32).collect();
+        self.epoch = 0;
+        self.seen = 0;
+        self.mark.iter_mut().for_each(|m| *m = 0);
+    }
+
+    /// Number of target points.
+    pub fn len(&self) -> usize {
+        self.ix.pts.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.ix.pts.is_empty()
+    }
+
+    /// The points (sorted by voxel; the order of [`Targets::d2`]).
+    pub fn points(&self) -> &[[f64; 3]] {
+        &self.ix.pts
+    }
+
+    /// Number of targets with d² < τ² for each τ.
+    pub fn counts(&self, taus: &[f64]) -> Vec<usize> {
+        let mut counts = vec![0usize; taus.len()];
+        let t2: Vec<f64> = taus.iter().map(|t| t * t).collect();
+        for &d in &self.d2 {
+            for (c, &t) in counts.iter_mut().zip(&t2) {
+                if d < t {
+                    *c += 1;
+                }
+            }
+        }
+        counts
+    }
+
+    /// Instantaneous fraction of targets with d² < τ² for each τ.
+    pub fn fractions(&self, taus: &[f64]) -> Vec<f64> {
+        let n = self.ix.pts.len().max(1) as f64;
+        self.counts(taus).into_iter().map(|c| c as f64 / n).collect()
+    }
+
+    /// Mean d² (the GT→fused half of CD); ∞ while no fused point exists.
+    pub fn mean_d2(&self) -> f64 {
+        if self.ix.pts.is_empty() {
+            return 0.0;
+        }
+        self.d2.iter().sum::<f64>() / self.ix.pts.len() as f64
+    }
+
+    /// Updates every distance to `fused` as it is now; `changed` must list every slot created or
+    /// moved since the previous update (stamped after it), each once.
+    ///
+    /// Returns, per changed slot, the squared distance to the nearest target (the fused→target
+    /// distance, which the push finds for free within h; a full search otherwise).
+    pub fn update(&mut self, fused: &FusedCloud, changed: &[u32]) -> Vec<f64> {
+        self.epoch += 1;
+        let h2 = self.ix.domain.h * self.ix.domain.h;
+        let mut recompute: Vec<u32> = Vec::new();
+        // Far targets whose nearest slot moved: full search (checked before the push, which
+        // may point them at slots that changed now).
+        let seen = self.seen;
+        self.seen = fused.epoch();
+        for &i in &self.far {
+            let iu = i as usize;
+            if self.nn[iu] != NONE && fused.stamp[self.nn[iu] as usize] > seen {
+                self.mark[iu] = self.epoch;
+                recompute.push(i);
+            }
+        }
+        let mut slot_min = vec![f64::INFINITY; changed.len()];
+        // Push: targets in the 27 voxels around each changed slot.
+        let ix = std::sync::Arc::clone(&self.ix);
+        for (ci, &s) in changed.iter().enumerate() {
+            let q = fused.pos[s as usize];
+            let k = fused.key[s as usize];
+            let mut own = f64::INFINITY;
+            ix.for_runs_around(k, 1, |_, lo, hi| {
+                for i in lo..hi {
+                    let iu = i as usize;
+                    let d = dist2(ix.pts[iu], q);
+                    own = own.min(d);
+                    if self.nn[iu] == s {
+                        if d <= self.d2[iu] {
+                            self.d2[iu] = if d < self.cap2 { d } else { f64::INFINITY };
+                        } else if self.mark[iu] != self.epoch {
+                            self.mark[iu] = self.epoch;
+                            recompute.push(i);
+                        }
+                    } else if d < self.d2[iu] && d < self.cap2 {
+                        self.d2[iu] = d;
+                        self.nn[iu] = s;
+                    }
+                }
+            });
+            slot_min[ci] = own;
+        }
+        // Far targets: minimum with the changed slots, or a full search if their slot moved.
+        // Both are pure per-target computations (run in parallel on the current rayon pool,
+        // which helps a lone long episode), applied afterwards in target order.
+        let far = std::mem::take(&mut self.far);
+        if !far.is_empty() && !changed.is_empty() {
+            let groups = ChangedBlocks::new(fused, changed);
+            // Far targets are sorted by block: one group per target block.
+            let mut spans = Vec::new();
+            let mut start = 0;
+            while start < far.len() {
+                let tb = self.block_of_point(far[start] as usize);
+                let mut end = start + 1;
+                while end < far.len() && self.block_of_point(far[end] as usize) == tb {
+                    end += 1;
+                }
+                spans.push((start, end, tb));
+                start = end;
+            }
+            let this = &*self;
+            let updates: Vec<Vec<FarUpdate>> = spans
+                .par_iter()
+                .with_min_len(8)
+                .map(|&(s, e, tb)| this.far_block(fused, &groups, &far[s..e], tb, seen))
+                .collect();
+            for u in updates.iter().flatten() {
+                let iu = u.target as usize;
+                self.d2[iu] = u.d2;
+                self.nn[iu] = u.nn;
+                if u.resolved {
+                    self.mark[iu] = 0;
+                }
+            }
+        }
+        let todo: Vec<u32> =
+            recompute.iter().copied().filter(|&i| self.mark[i as usize] == self.epoch).collect();
+        let this = &*self;
+        let found: Vec<(f64, u32)> =
+            todo.par_iter().with_min_len(64).map(|&i| this.search_moved(fused, i as usize)).collect();
+        for (&i, &(d, s)) in todo.iter().zip(&found) {
+            self.d2[i as usize] = d;
+            self.nn[i as usize] = s;
+        }
+        // The next far list: previous far targets and recomputed ones still farther than h.
+        let mut next: Vec<u32> =
+            far.into_iter().chain(recompute).filter(|&i| self.d2[i as usize] > h2).collect();
+        next.sort_unstable();
+        next.dedup();
+        self.far = next;
+        // Fused→target: exact when the push found a target within h (anything else is ≥ h).
+        for (m, &s) in slot_min.iter_mut().zip(changed) {
+            if *m > h2 {
+                *m = self.nearest_d2(fused.pos[s as usize]);
+            }
+        }
+        slot_min
+    }
+
+    /// For a target whose nearest slot moved in this step: d² to that slot's new position and
+    /// the slot — an upper bound of its new distance —, or `(cap², NONE)` when that is not
+    /// below the cap.
+    fn moved_bound(&self, fused: &FusedCloud, i: usize) -> (f64, u32) {
+        match self.nn[i] {
+            NONE => (self.cap2, NONE),
+            n => {
+                let d = dist2(self.ix.pts[i], fused.pos[n as usize]);
+                if d < self.cap2 {
+                    (d, n)
+                } else {
+                    (self.cap2, NONE)
+                }
+            }
+        }
+    }
+
+    /// The far targets `idx` of target block `tb` against the changed slots: the updates of
+    /// those whose distance changed (`resolved`: a target whose nearest slot moved and whose
+    /// answer is now known without a search).
+    fn far_block(
+        &self,
+        fused: &FusedCloud,
+        groups: &ChangedBlocks,
+        idx: &[u32],
+        tb: [i32; 3],
+        seen: u32,
+    ) -> Vec<FarUpdate> {
+        let h2 = self.ix.domain.h * self.ix.domain.h;
+        let mut out = Vec::new();
+        let mut max_d2: f64 = 0.0;
+        for &i in idx {
+            let iu = i as usize;
+            let bound = if self.mark[iu] == self.epoch {
+                // Nearest slot moved: its new position bounds the answer.
+                self.moved_bound(fused, iu).0
+            } else {
+                self.d2[iu].min(self.cap2)
+            };
+            max_d2 = max_d2.max(bound);
+        }
+        if max_d2 <= 0.0 {
+            return out;
+        }
+        let mut cand: Vec<(f64, usize)> = Vec::new();
+        groups.candidates(&self.ix.domain, tb, max_d2, &mut cand);
+        if cand.is_empty() {
+            // No changed slot is close enough to improve any target of this block.
+            return out;
+        }
+        cand.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        for &i in idx {
+            let iu = i as usize;
+            let p = self.ix.pts[iu];
+            let moved = self.mark[iu] == self.epoch;
+            let mut best =
+                if moved { self.moved_bound(fused, iu) } else { (self.d2[iu].min(self.cap2), self.nn[iu]) };
+            if !moved && best.0 <= 4.0 * h2 {
+                // Close: the changed slots within √d² lie in the fine voxels within
+                // ⌈√d²/h⌉ ≤ 2 of p's.
+                let k = self.ix.domain.key(p);
+                let r = (best.0.sqrt() / self.ix.domain.h).ceil() as i32;
+                for dz in -r..=r {
+                    for dy in -r..=r {
+                        for dx in -r..=r {
+                            let s = fused.slot_at([k[0] + dx, k[1] + dy, k[2] + dz]);
+                            if s != NONE && fused.stamp[s as usize] > seen {
+                                let d = dist2(p, fused.pos[s as usize]);
+                                if d < best.0 {
+                                    best = (d, s);
+                                }
+                            }
+                        }
+                    }
+                }
+            } else {
+                for &(lb, gi) in &cand {
+                    if lb >= best.0 {
+                        break;
+                    }
+                    let g = &groups.blocks[gi];
+                    if g.aabb.dist2(p) >= best.0 {
+                        continue;
+                    }
+                    let (d, j) = groups.nearest_in_group(g, p);
+                    if d < best.0 {
+                        best = (d, groups.slots[j]);
+                    }
+                }
+            }
+            if moved {
+                // Every unchanged slot is at least as far as the stored distance (the minimum
+                // before this step, or a changed slot's distance the push found): if a changed
+                // slot is that close, it is the answer and no search is needed.
+                if best.0 <= self.d2[iu] && best.1 != NONE {
+                    out.push(FarUpdate { target: i, d2: best.0, nn: best.1, resolved: true });
+                }
+            } else if best.0 < self.d2[iu] && best.0 < self.cap2 {
+                out.push(FarUpdate { target: i, d2: best.0, nn: best.1, resolved: false });
+            }
+        }
+        out
+    }
+
+    /// A full nearest search for target `i`, whose nearest slot moved away: `(d², slot)`, or
+    /// `(∞, NONE)` when nothing is within the cap. The moved slot's new position bounds the
+    /// answer from above, which keeps the search local.
+    fn search_moved(&self, fused: &FusedCloud, i: usize) -> (f64, u32) {
+        let (ub, ub_slot) = self.moved_bound(fused, i);
+        let (d, s) = fused.nearest(self.ix.pts[i], ub);
+        let (d, s) = if s == NONE { (ub, ub_slot) } else { (d, s) };
+        if s == NONE {
+            (f64::INFINITY, NONE)
+        } else {
+            (d, s)
+        }
+    }
+
+    /// Target-block index of point `i` (points are sorted by block).
+    fn block_of_point(&self, i: usize) -> [i32; 3] {
+        block_of(self.ix.domain.key(self.ix.pts[i]))
+    }
+}
+
+/// A far target's new distance (see [`Targets::far_block`]).
+struct FarUpdate {
+    target: u32,
+    d2: f64,
+    nn: u32,
+    resolved: bool,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    fn brute(targets: &Targets, fused: &FusedCloud, cap2: f64) -> Vec<f64> {
+        targets
+            .points()
+            .iter()
+            .map(|&p| {
+                let d = fused.pos.iter().map(|&q| dist2(p, q)).fold(f64::INFINITY, f64::min);
+                if d < cap2 {
+                    d
+                } else {
+                    f64::INFINITY
+                }
+            })
+            .collect()
+    }
+
+    /// Random "views": patches of a sphere of radius 0.5 sampled densely, with jitter, so
+    /// voxels are revisited and centroids move.
+    fn patch(rng: &mut rand_chacha::ChaCha8Rng, n: usize) -> Vec<[f64; 3]> {
+        let c: [f64; 3] = [rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)];
+        let cn = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+        (0..n)
+            .filter_map(|_| {
+                let d: [f64; 3] = [
+                    c[0] / cn + rng.gen_range(-0.5..0.5),
+                    c[1] / cn + rng.gen_range(-0.5..0.5),
+                    c[2] / cn + rng.gen_range(-0.5..0.5),
+                ];
+                let dn = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                (dn > 0.0).then(|| [0.5 * d[0] / dn, 0.5 * d[1] / dn, 0.5 * d[2] / dn])
+            })
+            .collect()
+    }
+
+    #[test]
+    fn incremental_distances_equal_brute_force() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.05);
+        // Targets: the sphere (radius 0.5) plus an inner sphere (never observed: stays far).
+        let mut tp: Vec<[f64; 3]> = patch(&mut rng, 4000);
+        tp.extend(patch(&mut rng, 4000));
+        tp.extend(patch(&mut rng, 500).iter().map(|p| [p[0] * 0.5, p[1] * 0.5, p[2] * 0.5]));
+        for cap in [f64::INFINITY, 0.03] {
+            // Updated after every insertion, and only after every third one (as at checkpoints:
+            // the changes of several insertions at once).
+            for every in [1usize, 3] {
+                let mut fused = FusedCloud::new(domain.clone());
+                let mut t = Targets::new(domain.clone(), &tp, cap).unwrap();
+                assert_eq!(t.len(), tp.len());
+                let mut seen = 0;
+                for step in 0..9 {
+                    let obs = patch(&mut rng, 6000);
+                    fused.insert(&obs);
+                    if (step + 1) % every != 0 {
+                        continue;
+                    }
+                    let changed = fused.changed_since(seen);
+                    seen = fused.epoch();
+                    let to_t = t.update(&fused, &changed);
+                    for (&s, &d) in changed.iter().zip(&to_t) {
+                        let q = fused.pos[s as usize];
+                        let b = t.points().iter().map(|&p| dist2(p, q)).fold(f64::INFINITY, f64::min);
+                        assert_eq!(d, b, "fused→target distance of slot {s}");
+                    }
+                    let want = brute(&t, &fused, cap * cap);
+                    for (i, (&a, &b)) in t.d2.iter().zip(&want).enumerate() {
+                        assert!(a == b, "cap {cap} every {every} step {step} target {i}: {a} vs brute {b}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn mark_within_equals_brute_force() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.05);
+        let tp = patch(&mut rng, 5000);
+        let t = Targets::new(domain, &tp, 0.01).unwrap();
+        let pts = patch(&mut rng, 800);
+        for tau in [0.004, 0.01, 0.023] {
+            let mut bits = vec![0u64; t.len().div_ceil(64)];
+            t.mark_within(&pts, tau, &mut bits);
+            for (i, &p) in t.points().iter().enumerate() {
+                let want = pts.iter().any(|&q| dist2(p, q) < tau * tau);
+                assert_eq!(bits[i / 64] >> (i % 64) & 1 == 1, want, "tau {tau} target {i}");
+            }
+        }
+    }
+
+    #[test]
+    fn fractions_and_mean() {
+        let domain = Domain::covering(0.005, [-1.0; 3], [1.0; 3], 0.05);
+        let tp = vec![[0.0, 0.0, 0.0], [0.015, 0.0, 0.0], [0.5, 0.0, 0.0]];
+        let mut t = Targets::new(domain.clone(), &tp, f64::INFINITY).unwrap();
+        let mut fused = FusedCloud::new(domain);
+        let d = fused.insert(&[[0.001, 0.0, 0.0]]);
+        t.update(&fused, &d.changed);
+        // Distances 0.001, 0.014, 0.499 (points sorted by voxel: same order here).
+        let f = t.fractions(&[0.01, 0.02, 0.03]);
+        assert_eq!(f, vec![1.0 / 3.0, 2.0 / 3.0, 2.0 / 3.0]);
+        let mean = (0.001f64.powi(2) + 0.014f64.powi(2) + 0.499f64.powi(2)) / 3.0;
+        assert!((t.mean_d2() - mean).abs() < 1e-12);
+        assert!(
+            Targets::new(Domain::covering(0.005, [0.0; 3], [0.1; 3], 0.0), &[[3.0, 0.0, 0.0]], 1.0).is_err()
+        );
+    }
+}
+
+impl Targets {
+    /// Squared distance from `p` to the nearest target point (exact; ∞ when there are none).
+    pub fn nearest_d2(&self, p: [f64; 3]) -> f64 {
+        nearest_in(self, p, f64::INFINITY).0
+    }
+
+    /// Sets bit i of `bits` (targets in [`Targets::points`] order, 64 per word) for every
+    /// target strictly closer than `tau` to one of `points` — the coverage of one fused view
+    /// without distance bookkeeping (the oracle's per-candidate gains). Each point visits the
+    /// fine voxels within ⌈τ/h⌉ of its own, as runs along x that are contiguous in the sorted
+    /// targets.
+    pub fn mark_within(&self, points: &[[f64; 3]], tau: f64, bits: &mut [u64]) {
+        let t2 = tau * tau;
+        let r = (tau / self.ix.domain.h).ceil() as i32;
+        for &q in points {
+            self.ix.for_runs_around(self.ix.domain.key(q), r, |_, lo, hi| {
+                for i in lo..hi {
+                    if dist2(self.ix.pts[i as usize], q) < t2 {
+                        bits[i as usize / 64] |= 1 << (i % 64);
+                    }
+                }
+            });
+        }
+    }
+
+    /// The index range of the targets in target block `t`.
+    fn block_range(&self, t: u32) -> std::ops::Range<usize> {
+        let s = &self.ix.cell_start[t as usize];
+        s[0] as usize..s[BLOCK_CELLS] as usize
+    }
+}
+
+impl Bucketed for Targets {
+    fn domain(&self) -> &Domain {
+        &self.ix.domain
+    }
+    fn for_cell<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], mut f: F) {
+        let Some(b) = self.ix.domain.block_index(block_of(k)) else { return };
+        let t = self.ix.table[b];
+        if t != NONE {
+            let s = &self.ix.cell_start[t as usize];
+            let li = local_index(k);
+            for i in s[li]..s[li + 1] {
+                f(i, self.ix.pts[i as usize]);
+            }
+        }
+    }
+    fn for_block<F: FnMut(u32, [f64; 3])>(&self, b: [i32; 3], mut f: F) {
+        let Some(bi) = self.ix.domain.block_index(b) else { return };
+        let t = self.ix.table[bi];
+        if t != NONE {
+            for i in self.block_range(t) {
+                f(i as u32, self.ix.pts[i]);
+            }
+        }
+    }
+    fn supergrid(&self) -> &SuperGrid {
+        &self.ix.supergrid
+    }
+}
+
+#[cfg(test)]
+mod nearest_tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn nearest_target_equals_brute_force() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let domain = Domain::covering(0.005, [-1.0; 3], [1.0; 3], 0.05);
+        let pts: Vec<[f64; 3]> = (0..3000)
+            .map(|i| {
+                if i % 10 == 0 {
+                    [rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)]
+                } else {
+                    [rng.gen_range(-0.2..0.2), 0.3 + rng.gen_range(-0.01..0.01), rng.gen_range(-0.2..0.2)]
+                }
+            })
+            .collect();
+        let t = Targets::new(domain, &pts, f64::INFINITY).unwrap();
+        for _ in 0..500 {
+            let p = [rng.gen_range(-1.0..1.0), rng.gen_range(-0.1..0.7), rng.gen_range(-1.0..1.0)];
+            let want = pts.iter().map(|&q| dist2(p, q)).fold(f64::INFINITY, f64::min);
+            assert_eq!(t.nearest_d2(p), want);
+        }
+    }
+}

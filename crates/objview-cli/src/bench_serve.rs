@@ -74,6 +74,16 @@ fn print(r: &LoadReport, what: &str) {
         r.server.p50_ms, r.server.p99_ms, r.server.mean_ms, r.server.samples
     );
     println!("  create (start view): p50 {:.2} ms, p99 {:.2} ms", r.create.p50_ms, r.create.p99_ms);
+    if r.depth.samples > 0 {
+        println!(
+            "  depth fetch (1 MiB NPY, no engine work): p50 {:.2} ms, p99 {:.2} ms",
+            r.depth.p50_ms, r.depth.p99_ms
+        );
+    }
+    println!(
+        "  fairness: longest wait for a step {:.2} ms (client {}, {:.1}× the p50); all episodes of a client took {:.2}–{:.2} s",
+        r.max_wait.ms, r.max_wait.client, r.max_wait.over_p50, r.client_seconds.0, r.client_seconds.1
+    );
 }
 
 pub fn run(a: ServeBenchArgs) -> Result<()> {
@@ -133,6 +143,8 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
         let warm = LoadConfig { clients: 1, episodes_per_client: 1, ..cfg.clone() };
         run_load(&warm)?;
         let r = run_load(&cfg)?;
+        let sc = server.state.scenes.stats();
+        eprintln!("bench serve: scene cache: {} build(s), {} reuse(s), {} held", sc.builds, sc.hits, sc.held);
         let what = format!(
             "in-process server, {} ({} triangles, {} GT points), view space {}",
             a.object,

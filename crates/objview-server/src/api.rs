@@ -219,8 +219,13 @@ async fn candidate_set(
 
 async fn create(State(st): State<Arc<AppState>>, c: Caller, Body(body): Body) -> Result<Response, ApiError> {
     let spec = CreateSpec::parse(&body, &st.pool)?;
+    // The prepared scene first, outside the engine gate: a scene being built (seconds, once per
+    // object) keeps no core's permit from the steps of running episodes, and concurrent creates
+    // of one object wait for that one build on the blocking pool, not in the gate's queue.
+    let (s2, spec2) = (st.clone(), spec.clone());
+    let scene = blocking(move || s2.scene_for(&spec2)).await?;
     let gate = st.clone();
-    let v = engine(&gate, move || st.create(&c.owner, spec)).await?;
+    let v = engine(&gate, move || st.create(&c.owner, spec, scene)).await?;
     Ok((StatusCode::CREATED, Json(v)).into_response())
 }
 

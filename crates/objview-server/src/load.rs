@@ -2,7 +2,8 @@
 //! connection pool each) play budgeted episodes of random feasible candidate moves against a
 //! server, and the figures are throughput (moves per second) and step latency — measured by the
 //! client around each action request, and by the server inside its action handler (the
-//! `Server-Timing` header).
+//! `Server-Timing` header) — and fairness: the longest any client waited for one step response,
+//! and how long the slowest and the fastest client took for all their episodes.
 
 use std::sync::{Arc, Barrier};
 use std::time::Instant;
@@ -87,14 +88,36 @@ pub struct LoadReport {
     pub server: Latency,
     /// Creating an episode (takes the start view), client side.
     pub create: Latency,
+    /// Fetching an observation's depth (a 1 MiB NPY; no engine work), client side: the cost of
+    /// a request apart from the engine's queue.
+    pub depth: Latency,
+    /// Fairness: the longest any client waited for one step response (client side).
+    pub max_wait: MaxWait,
+    /// Fairness: seconds each client took for all its episodes, the fastest and the slowest
+    /// (every client plays the same number of moves).
+    pub client_seconds: (f64, f64),
+}
+
+/// The longest wait for a step response, and who waited.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct MaxWait {
+    /// Milliseconds.
+    pub ms: f64,
+    /// The client (0-based).
+    pub client: usize,
+    /// Its ratio to the median step latency (client side): near 1 when every client is served
+    /// in turn, large when one is starved.
+    pub over_p50: f64,
 }
 
 struct ClientStats {
+    seconds: f64,
     episodes: usize,
     steps: usize,
     client_ms: Vec<f64>,
     server_ms: Vec<f64>,
     create_ms: Vec<f64>,
+    depth_ms: Vec<f64>,
 }
 
 fn play(
@@ -105,13 +128,16 @@ fn play(
 ) -> Result<ClientStats, ClientError> {
     let client = Client::new(&cfg.url, cfg.token.as_deref());
     let mut stats = ClientStats {
+        seconds: 0.0,
         episodes: 0,
         steps: 0,
         client_ms: Vec::new(),
         server_ms: Vec::new(),
         create_ms: Vec::new(),
+        depth_ms: Vec::new(),
     };
     barrier.wait();
+    let started = Instant::now();
     for e in 0..cfg.episodes_per_client {
         let seed = objview_geom::hash::splitmix64(cfg.seed ^ ((index as u64) << 32) ^ e as u64);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
@@ -131,7 +157,9 @@ fn play(
         let mut step = 0;
         for &i in order.iter().take(cfg.budget) {
             if cfg.fetch_depth {
+                let t = Instant::now();
                 client.depth(&id, step)?;
+                stats.depth_ms.push(t.elapsed().as_secs_f64() * 1e3);
             }
             let t = Instant::now();
             let (obs, server) = client.act(&id, step, &Action::move_to(&candidates[i]))?;
@@ -147,6 +175,7 @@ fn play(
         client.result(&id)?;
         stats.episodes += 1;
     }
+    stats.seconds = started.elapsed().as_secs_f64();
     Ok(stats)
 }
 
@@ -188,14 +217,28 @@ pub fn run_load(cfg: &LoadConfig) -> Result<LoadReport, ClientError> {
         return Err(e);
     }
     let steps: usize = stats.iter().map(|s| s.steps).sum();
+    let client = Latency::of(stats.iter().flat_map(|s| s.client_ms.iter().copied()).collect());
+    let (mut worst, mut who) = (0.0f64, 0);
+    for (i, s) in stats.iter().enumerate() {
+        if let Some(m) = s.client_ms.iter().copied().max_by(f64::total_cmp) {
+            if m > worst {
+                (worst, who) = (m, i);
+            }
+        }
+    }
+    let secs = stats.iter().map(|s| s.seconds);
+    let client_seconds = (secs.clone().fold(f64::INFINITY, f64::min), secs.fold(f64::NEG_INFINITY, f64::max));
     Ok(LoadReport {
         clients: cfg.clients,
         episodes: stats.iter().map(|s| s.episodes).sum(),
         steps,
         seconds,
         steps_per_second: steps as f64 / seconds.max(1e-9),
-        client: Latency::of(stats.iter().flat_map(|s| s.client_ms.iter().copied()).collect()),
         server: Latency::of(stats.iter().flat_map(|s| s.server_ms.iter().copied()).collect()),
         create: Latency::of(stats.iter().flat_map(|s| s.create_ms.iter().copied()).collect()),
+        depth: Latency::of(stats.iter().flat_map(|s| s.depth_ms.iter().copied()).collect()),
+        max_wait: MaxWait { ms: worst, client: who, over_p50: worst / client.p50_ms },
+        client_seconds,
+        client,
     })
 }

@@ -5,6 +5,7 @@
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 use objview_dataset::ObjectRef;
@@ -109,16 +110,39 @@ type SceneKey = (String, PathBuf, Option<PathBuf>, String);
 type SceneSlot = Arc<Mutex<Option<Arc<Scene>>>>;
 
 /// Prepared scenes per (object, view space), built on first use (that takes seconds: the
-/// observable reference renders every reference view, unless the on-disk cache has it).
-/// Concurrent requests for the same scene wait for one build. At most `capacity` scenes are
-/// kept (tens of MB each for a 100k-triangle object): the least recently used one is dropped
-/// first; running episodes hold their own reference, so dropping never affects them.
+/// mesh and ground truth are parsed, and the observable reference renders every reference view
+/// unless the on-disk cache has it). A prepared scene also has its metric target sets built
+/// ([`Scene::fresh_targets`]), so every episode on it starts from a clone of them. Concurrent
+/// requests for the same scene wait for one build. At most `capacity` scenes are kept (tens of
+/// MB each for a 100k-triangle object; `objview serve --scene-cache N`): the least recently
+/// used one is dropped first; running episodes hold their own reference, so dropping never
+/// affects them.
 pub struct SceneCache {
     normalize: Normalization,
     cache_dir: Option<PathBuf>,
     settings: EpisodeSettings,
     capacity: usize,
     entries: Mutex<Entries>,
+    stats: Counters,
+}
+
+/// How often a scene was found ready, and how often one was built.
+#[derive(Default)]
+struct Counters {
+    hits: AtomicU64,
+    builds: AtomicU64,
+}
+
+/// What a [`SceneCache`] has done so far.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SceneCacheStats {
+    /// Requests answered with a scene already prepared (or prepared meanwhile by another
+    /// request they waited for).
+    pub hits: u64,
+    /// Scenes built (a scene dropped and asked for again is built again).
+    pub builds: u64,
+    /// Scenes held now (built or being built).
+    pub held: usize,
 }
 
 /// The cache's map, with a use counter per entry for least-recently-used eviction.
@@ -141,6 +165,16 @@ impl SceneCache {
             settings: EpisodeSettings::default(),
             capacity: DEFAULT_SCENE_CACHE,
             entries: Mutex::default(),
+            stats: Counters::default(),
+        }
+    }
+
+    /// Hits, builds and scenes held so far.
+    pub fn stats(&self) -> SceneCacheStats {
+        SceneCacheStats {
+            hits: self.stats.hits.load(Ordering::Relaxed),
+            builds: self.stats.builds.load(Ordering::Relaxed),
+            held: self.len(),
         }
     }
 
@@ -188,12 +222,15 @@ impl SceneCache {
     }
 
     /// The scene of `obj` in the built-in view space `space` (blocking; call it off the async
-    /// executor). The error text may name files: do not send it to clients.
+    /// executor, and outside the engine gate: a request waiting here for another's build must
+    /// not hold a core's permit). The error text may name files: do not send it to clients.
     pub fn get(&self, obj: &ObjectRef, space: &str) -> Result<Arc<Scene>, String> {
         let key = (obj.uid.clone(), obj.mesh.clone(), obj.gt_cloud.clone(), space.to_string());
         let entry = self.touch(key);
+        // Held while building: a second request for this scene waits here for the first.
         let mut slot = entry.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(s) = slot.as_ref() {
+            self.stats.hits.fetch_add(1, Ordering::Relaxed);
             return Ok(s.clone());
         }
         let vs = ViewSpace::builtin(space).ok_or_else(|| format!("unknown view space {space:?}"))?;
@@ -205,7 +242,12 @@ impl SceneCache {
         };
         let scene = load_scene(&src, &vs, space, &self.settings, self.cache_dir.as_deref())
             .map_err(|e| format!("{}: {e}", obj.uid))?;
+        // The target sets' spatial indexes, built once here rather than by the first episode
+        // (episodes use the default τ list; another list builds its own on first use).
+        let max_tau = self.settings.taus.iter().cloned().fold(0.0, f64::max);
+        scene.fresh_targets(max_tau).map_err(|e| format!("{}: {e}", obj.uid))?;
         let scene = Arc::new(scene);
+        self.stats.builds.fetch_add(1, Ordering::Relaxed);
         *slot = Some(scene.clone());
         Ok(scene)
     }

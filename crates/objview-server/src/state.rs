@@ -18,7 +18,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use objview_episode::{Action, Episode, EpisodeSettings, MethodInfo, TerminalSource};
+use objview_episode::{Action, Episode, EpisodeSettings, MethodInfo, Scene, TerminalSource};
 use objview_geom::Pose;
 use objview_render::Camera;
 use objview_views::{ViewSet, ViewSpace};
@@ -307,7 +307,7 @@ impl AppState {
                     );
                     continue;
                 }
-                let (mut ep, record) = match self.prepare(&spec) {
+                let (mut ep, record) = match self.scene_for(&spec).and_then(|sc| self.prepare(&spec, sc)) {
                     Ok(x) => x,
                     Err(e) => {
                         eprintln!(
@@ -354,9 +354,9 @@ impl AppState {
         Ok(())
     }
 
-    /// Builds the episode of `spec` (the scene may take seconds the first time) and the settings
-    /// record of its result.
-    fn prepare(&self, spec: &CreateSpec) -> Result<(Episode, Value), ApiError> {
+    /// The prepared scene of `spec`'s object and view space, from the scene cache (seconds the
+    /// first time, then a lookup). Blocking; the routes call it outside the engine gate.
+    pub fn scene_for(&self, spec: &CreateSpec) -> Result<Arc<Scene>, ApiError> {
         let split = self
             .pool
             .split(&spec.split)
@@ -364,8 +364,12 @@ impl AppState {
         let obj = split.object(&ObjectKey::Uid(spec.object.clone())).ok_or_else(|| {
             ApiError::NotFound(format!("split {} has no object {:?}", spec.split, spec.object))
         })?;
-        let scene =
-            self.scenes.get(obj, &spec.view_space).map_err(|e| internal("preparing the object", e))?;
+        self.scenes.get(obj, &spec.view_space).map_err(|e| internal("preparing the object", e))
+    }
+
+    /// Builds the episode of `spec` on its prepared `scene` (takes and scores the start view)
+    /// and the settings record of its result.
+    fn prepare(&self, spec: &CreateSpec, scene: Arc<Scene>) -> Result<(Episode, Value), ApiError> {
         let settings = EpisodeSettings {
             candidates: spec.candidate_set.clone(),
             record_timings: spec.record_timings,
@@ -410,9 +414,10 @@ impl AppState {
             .ok_or_else(|| ApiError::NotFound(format!("no episode {id:?}")))
     }
 
-    /// `POST /v1/episodes`: starts an episode, takes its start view, stores it; the 201 body.
-    pub fn create(&self, owner: &str, spec: CreateSpec) -> Result<Value, ApiError> {
-        let (ep, record) = self.prepare(&spec)?;
+    /// `POST /v1/episodes`: starts an episode on `scene` ([`AppState::scene_for`]), takes its
+    /// start view, stores it; the 201 body.
+    pub fn create(&self, owner: &str, spec: CreateSpec, scene: Arc<Scene>) -> Result<Value, ApiError> {
+        let (ep, record) = self.prepare(&spec, scene)?;
         let id = new_id();
         let row = EpisodeRow {
             id: id.clone(),

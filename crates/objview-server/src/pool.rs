@@ -244,8 +244,7 @@ impl SceneCache {
             .map_err(|e| format!("{}: {e}", obj.uid))?;
         // The target sets' spatial indexes, built once here rather than by the first episode
         // (episodes use the default τ list; another list builds its own on first use).
-        let max_tau = self.settings.taus.iter().cloned().fold(0.0, f64::max);
-        scene.fresh_targets(max_tau).map_err(|e| format!("{}: {e}", obj.uid))?;
+        scene.fresh_targets(&self.settings.taus).map_err(|e| format!("{}: {e}", obj.uid))?;
         let scene = Arc::new(scene);
         self.stats.builds.fetch_add(1, Ordering::Relaxed);
         *slot = Some(scene.clone());

@@ -3,7 +3,9 @@
 //! coverage against the current fused cloud, as the reference implementation computes it.
 //! Exact, and bounded: only distances below τ_max matter, so nothing beyond τ_max is searched.
 //!
-//! Each target keeps its exact nearest-fused d² below τ_max² (∞ otherwise) and that slot.
+//! Each target keeps its exact nearest-fused d² below τ_max² (∞ otherwise) and that slot —
+//! except a target within τ_min of its slot, which is covered at every τ: it only keeps that
+//! slot as a witness, and is looked at again only when the witness moves.
 //! After an insertion only the changed slots (created or moved) can change a distance, and only
 //! for targets within τ_max of them; the changed slots are grouped by block
 //! ([`ChangedBlocks`]) and each target block with live targets looks at the groups within
@@ -56,9 +58,13 @@ pub struct Coverage {
     t2: Vec<f64>,
     /// τ_max².
     r2: f64,
+    /// τ_min².
+    tmin2: f64,
     /// τ_min² less the margin: the retirement bound.
     retire2: f64,
-    /// Nearest-fused d² (∞: none below τ_max); frozen (below τ_min²) once retired.
+    /// Nearest-fused d² (∞: none below τ_max) — exact while at least τ_min²; below τ_min² it
+    /// is the distance to the slot `nn`, which covers the target at every τ, and may be an
+    /// overestimate (nothing needs more); frozen once retired.
     d2: Vec<f64>,
     /// Nearest slot, or NONE.
     nn: Vec<u32>,
@@ -116,6 +122,7 @@ impl Coverage {
             counts: vec![0; t2.len()],
             t2,
             r2,
+            tmin2,
             retire2: tmin2 - RETIRE_MARGIN2,
             d2: vec![f64::INFINITY; n],
             nn: vec![NONE; n],
@@ -241,6 +248,23 @@ impl Coverage {
             let p = self.ix.pts[iu];
             let (old, old_nn) = (self.d2[iu], self.nn[iu]);
             let moved = old_nn != NONE && fused.stamp[old_nn as usize] == epoch;
+            if old < self.tmin2 {
+                // Covered at every τ by `old_nn`: nothing to do while it stays within τ_min.
+                let d = if moved { dist2(p, fused.pos[old_nn as usize]) } else { old };
+                if d < self.tmin2 {
+                    if d != old {
+                        let retire = self.permanent(fused, p, old_nn);
+                        out.push(Change { target: i, d2: d, nn: old_nn, retire });
+                    }
+                    continue;
+                }
+                // It moved away: the exact distance, from scratch.
+                let (d, s) = fused.nearest(p, self.r2);
+                let (d2, nn) = if s != NONE { (d, s) } else { (f64::INFINITY, NONE) };
+                let retire = self.permanent(fused, p, nn);
+                out.push(Change { target: i, d2, nn, retire });
+                continue;
+            }
             // The nearest changed slot below the bound that matters.
             let mut best = if moved {
                 let d = dist2(p, fused.pos[old_nn as usize]);
@@ -285,8 +309,8 @@ impl Coverage {
                     (f64::INFINITY, NONE)
                 }
             };
-            let retire = self.permanent(fused, p, nn);
-            if d2 != old || nn != old_nn || retire {
+            if d2 != old || nn != old_nn {
+                let retire = self.permanent(fused, p, nn);
                 out.push(Change { target: i, d2, nn, retire });
             }
         }

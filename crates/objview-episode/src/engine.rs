@@ -439,7 +439,7 @@ impl Episode {
         self.frame.observed_points_into(&mut self.points);
         let delta = self.fused.insert(&self.points);
         let t_fuse = t0.elapsed().as_secs_f64();
-        self.groups.rebuild(&self.fused, &delta.changed);
+        self.groups.rebuild_latest(&self.fused);
         metrics::update_coverage(&mut self.gt, &mut self.reference, &self.fused, &self.groups);
         let t_cov = t0.elapsed().as_secs_f64();
         metrics::add_new_voxels(&mut self.ms, &self.fused, delta.new_slots);

@@ -23,9 +23,16 @@ pub struct FusedBlock {
     pub slots: Vec<u32>,
     /// Its entry in the cloud's [`SuperGrid`].
     pub handle: Option<SuperHandle>,
-    /// The fine voxels changed by the insertion `changed_epoch` (bit = local index).
+    /// The fine voxels changed by the latest insertion that touched the block (bit = local
+    /// index).
     changed_bits: [u64; BLOCK_CELLS / 64],
-    changed_epoch: u32,
+    /// Per fine voxel: its position in `slots` (and `centroids`), valid where `cells` is set.
+    local: Box<[u16; BLOCK_CELLS]>,
+    /// The positions of the block's slots (in `slots` order), a block-local copy of
+    /// [`FusedCloud::pos`] that an insertion reads without a cache miss per voxel.
+    centroids: Vec<[f64; 3]>,
+    /// Scratch of [`FusedCloud::insert`]: this insertion's point count, then offset.
+    bucket: u32,
 }
 
 /// The fused cloud: one point per occupied fine voxel.
@@ -48,22 +55,19 @@ pub struct FusedCloud {
     /// The occupied blocks by superblock (far nearest searches).
     pub supergrid: SuperGrid,
     epoch: u32,
-    /// Per slot, what the current insertion accumulates (one cache line per point).
-    hot: Vec<Accum>,
+    /// Scratch of [`FusedCloud::insert`]: one block's sums by fine voxel (stays in cache).
+    scratch: Box<[Accum; BLOCK_CELLS]>,
+    /// The blocks the latest insertion changed, as (domain index, allocation index), by domain
+    /// index: [`FusedCloud::latest_changes`].
+    latest: Vec<(u32, u32)>,
 }
 
-/// A slot's sum and count of the current insertion's points, and that insertion's epoch.
+/// A voxel's sum and count of the current insertion's points, and its first point.
 #[derive(Debug, Clone, Copy, Default)]
-#[repr(C, align(32))]
 struct Accum {
     sum: [f64; 3],
     count: u32,
-    epoch: u32,
-}
-
-/// Number of set bits.
-fn count_bits(bits: &[u64]) -> usize {
-    bits.iter().map(|b| b.count_ones() as usize).sum()
+    first: u32,
 }
 
 /// What one insertion changed.
@@ -91,7 +95,8 @@ impl FusedCloud {
             block: Vec::new(),
             stamp: Vec::new(),
             epoch: 0,
-            hot: Vec::new(),
+            scratch: Box::new([Accum::default(); BLOCK_CELLS]),
+            latest: Vec::new(),
         }
     }
 
@@ -140,19 +145,25 @@ impl FusedCloud {
     }
 
     /// Fuses `points` (object frame): per voxel, the new centroid of the previous point (if
-    /// any, weight 1) and the new points in that voxel, summed in input order.
+    /// any, weight 1) and the new points in that voxel, summed in input order. New voxels get
+    /// their slots in the order of their first point.
+    ///
+    /// The points are first bucketed by block (a stable counting sort), then each block's
+    /// points are accumulated with that block's voxel table and sums in cache: in pixel order
+    /// they would visit the blocks of a whole scanline again and again.
     pub fn insert(&mut self, points: &[[f64; 3]]) -> FusionDelta {
         self.epoch += 1;
         let epoch = self.epoch;
         let mut delta = FusionDelta::default();
-        // Blocks touched by this insertion (domain index, allocation index).
-        let mut touched: Vec<(u32, u32)> = Vec::new();
-        // The previous point's block: consecutive pixels mostly share one.
+        // Pass 1: each point's block (allocated on first use) and voxel; per-block counts.
+        let mut at: Vec<(u32, u16)> = Vec::with_capacity(points.len());
+        let mut touched: Vec<u32> = Vec::new();
         let mut last: (usize, u32) = (usize::MAX, NONE);
         for &p in points {
             let k = self.domain.key(p);
             let Some(b) = self.domain.block_index(block_of(k)) else {
                 delta.dropped += 1;
+                at.push((NONE, 0));
                 continue;
             };
             let t = if b == last.0 {
@@ -169,46 +180,110 @@ impl FusedCloud {
                         slots: Vec::new(),
                         handle,
                         changed_bits: [0; BLOCK_CELLS / 64],
-                        changed_epoch: 0,
+                        local: Box::new([0; BLOCK_CELLS]),
+                        centroids: Vec::new(),
+                        bucket: 0,
                     });
                 }
                 last = (b, t);
                 t
             };
             let blk = &mut self.blocks[t as usize];
-            if blk.changed_epoch != epoch {
-                blk.changed_epoch = epoch;
-                blk.changed_bits = [0; BLOCK_CELLS / 64];
-                touched.push((b as u32, t));
+            if blk.bucket == 0 {
+                touched.push(t);
             }
-            let li = local_index(k);
-            let mut s = blk.cells[li];
-            if s == NONE {
-                s = self.pos.len() as u32;
-                blk.cells[li] = s;
-                blk.slots.push(s);
-                self.pos.push(p);
-                self.key.push(k);
-                self.block.push(b as u32);
-                self.stamp.push(0);
-                self.hot.push(Accum::default());
-                delta.new_slots += 1;
-            }
-            let h = &mut self.hot[s as usize];
-            if h.epoch != epoch {
-                *h = Accum { sum: [0.0; 3], count: 0, epoch };
-                blk.changed_bits[li >> 6] |= 1 << (li & 63);
-            }
-            h.sum[0] += p[0];
-            h.sum[1] += p[1];
-            h.sum[2] += p[2];
-            h.count += 1;
+            blk.bucket += 1;
+            at.push((t, local_index(k) as u16));
         }
+        // Counts → start offsets, then the point indices by block, in input order.
+        let mut offset = 0u32;
+        for &t in &touched {
+            let blk = &mut self.blocks[t as usize];
+            let n = blk.bucket;
+            blk.bucket = offset;
+            offset += n;
+        }
+        let mut order = vec![0u32; offset as usize];
+        for (i, &(t, _)) in at.iter().enumerate() {
+            if t != NONE {
+                let blk = &mut self.blocks[t as usize];
+                order[blk.bucket as usize] = i as u32;
+                blk.bucket += 1;
+            }
+        }
+        // Pass 2: block by block, sums per voxel (in the scratch), then the new centroids of
+        // the block's voxels seen before; voxels seen for the first time are kept aside with
+        // their first point and centroid.
+        let mut fresh: Vec<(u32, u32, u16, [f64; 3])> = Vec::new();
+        let mut start = 0usize;
+        for &t in &touched {
+            let blk = &mut self.blocks[t as usize];
+            let end = blk.bucket as usize;
+            blk.bucket = 0;
+            blk.changed_bits = [0; BLOCK_CELLS / 64];
+            let scratch = &mut self.scratch;
+            for &i in &order[start..end] {
+                let li = at[i as usize].1 as usize;
+                let (w, bit) = (li >> 6, 1u64 << (li & 63));
+                let a = &mut scratch[li];
+                if blk.changed_bits[w] & bit == 0 {
+                    blk.changed_bits[w] |= bit;
+                    *a = Accum { sum: [0.0; 3], count: 0, first: i };
+                }
+                let p = points[i as usize];
+                a.sum[0] += p[0];
+                a.sum[1] += p[1];
+                a.sum[2] += p[2];
+                a.count += 1;
+            }
+            start = end;
+            for (w, &bits) in blk.changed_bits.iter().enumerate() {
+                let mut bits = bits;
+                while bits != 0 {
+                    let li = (w << 6) | bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    let Accum { sum: a, count, first } = scratch[li];
+                    let n = count as f64;
+                    let s = blk.cells[li];
+                    if s == NONE {
+                        fresh.push((first, t, li as u16, [a[0] / n, a[1] / n, a[2] / n]));
+                        continue;
+                    }
+                    let c = &mut blk.centroids[blk.local[li] as usize];
+                    *c = [(c[0] + a[0]) / (n + 1.0), (c[1] + a[1]) / (n + 1.0), (c[2] + a[2]) / (n + 1.0)];
+                    self.pos[s as usize] = *c;
+                    self.stamp[s as usize] = epoch;
+                    if let Some(h) = blk.handle {
+                        self.supergrid.grow(h, *c);
+                    }
+                }
+            }
+        }
+        // New slots in the order of their first point (as one pass in input order would).
+        fresh.sort_unstable_by_key(|f| f.0);
+        for &(i, t, li, c) in &fresh {
+            let s = self.pos.len() as u32;
+            let blk = &mut self.blocks[t as usize];
+            blk.cells[li as usize] = s;
+            blk.local[li as usize] = blk.slots.len() as u16;
+            blk.slots.push(s);
+            blk.centroids.push(c);
+            if let Some(h) = blk.handle {
+                self.supergrid.grow(h, c);
+            }
+            self.pos.push(c);
+            self.key.push(self.domain.key(points[i as usize]));
+            self.block.push(self.domain.block_index(blk.key).expect("an allocated block") as u32);
+            self.stamp.push(epoch);
+        }
+        delta.new_slots = fresh.len();
         // Spatial order (block, then voxel) for cache-friendly metric updates: the touched
         // blocks by domain index, and each one's changed voxels by local index.
-        touched.sort_unstable();
-        let first_new = self.pos.len() - delta.new_slots;
-        for &(_, t) in &touched {
+        let mut by_domain = std::mem::take(&mut self.latest);
+        by_domain.clear();
+        by_domain.extend(touched.iter().map(|&t| (self.table_index(t), t)));
+        by_domain.sort_unstable();
+        for &(_, t) in &by_domain {
             let blk = &self.blocks[t as usize];
             for (w, &bits) in blk.changed_bits.iter().enumerate() {
                 let mut bits = bits;
@@ -218,22 +293,34 @@ impl FusedCloud {
                     delta.changed.push(blk.cells[li]);
                 }
             }
-            for &s in &delta.changed[delta.changed.len() - count_bits(&blk.changed_bits)..] {
-                let si = s as usize;
-                self.stamp[si] = epoch;
-                let (a, n) = (self.hot[si].sum, self.hot[si].count as f64);
-                self.pos[si] = if si >= first_new {
-                    [a[0] / n, a[1] / n, a[2] / n]
-                } else {
-                    let q = self.pos[si];
-                    [(q[0] + a[0]) / (n + 1.0), (q[1] + a[1]) / (n + 1.0), (q[2] + a[2]) / (n + 1.0)]
-                };
-                if let Some(h) = blk.handle {
-                    self.supergrid.grow(h, self.pos[si]);
-                }
-            }
         }
+        self.latest = by_domain;
         delta
+    }
+
+    /// Calls `f(block key, slots, positions)` for each block the latest insertion changed, by
+    /// domain index, with that block's changed slots and their positions by fine voxel — what
+    /// [`FusionDelta::changed`] lists, read from block-local memory.
+    pub fn latest_changes(&self, mut f: impl FnMut([i32; 3], &mut dyn Iterator<Item = (u32, [f64; 3])>)) {
+        for &(_, t) in &self.latest {
+            let blk = &self.blocks[t as usize];
+            let mut it = blk.changed_bits.iter().enumerate().flat_map(move |(w, &bits)| {
+                let mut bits = bits;
+                std::iter::from_fn(move || {
+                    (bits != 0).then(|| {
+                        let li = (w << 6) | bits.trailing_zeros() as usize;
+                        bits &= bits - 1;
+                        (blk.cells[li], blk.centroids[blk.local[li] as usize])
+                    })
+                })
+            });
+            f(blk.key, &mut it);
+        }
+    }
+
+    /// The domain block index of allocated block `t`.
+    fn table_index(&self, t: u32) -> u32 {
+        self.domain.block_index(self.blocks[t as usize].key).expect("an allocated block") as u32
     }
 
     /// The slots created or moved by the insertions after insertion `epoch` (0: every slot), in
@@ -300,6 +387,43 @@ mod tests {
         // Out of domain points are counted, not fused.
         assert_eq!(f.insert(&[[5.0, 0.0, 0.0]]).dropped, 1);
         assert_eq!(f.len(), 2);
+    }
+
+    #[test]
+    fn latest_groups_equal_the_groups_of_the_delta() {
+        use crate::grid::ChangedBlocks;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+        let mut f = FusedCloud::new(domain());
+        let mut latest = ChangedBlocks::new(&f, &[]);
+        for _ in 0..5 {
+            let pts: Vec<[f64; 3]> = (0..4000)
+                .map(|_| [rng.gen_range(-0.2..0.2), rng.gen_range(-0.2..0.2), rng.gen_range(-0.05..0.05)])
+                .collect();
+            let d = f.insert(&pts);
+            let of_delta = ChangedBlocks::new(&f, &d.changed);
+            latest.rebuild_latest(&f);
+            assert_eq!(latest.blocks.len(), of_delta.blocks.len());
+            for (a, b) in latest.blocks.iter().zip(&of_delta.blocks) {
+                assert_eq!(a.key, b.key);
+                let set = |g: &ChangedBlocks, r: (usize, usize)| {
+                    let mut v: Vec<(u32, [u64; 3])> = (r.0..r.1)
+                        .filter(|&i| g.slots[i] != NONE)
+                        .map(|i| {
+                            (
+                                g.slots[i],
+                                [g.xyz[0][i].to_bits(), g.xyz[1][i].to_bits(), g.xyz[2][i].to_bits()],
+                            )
+                        })
+                        .collect();
+                    v.sort_unstable();
+                    v
+                };
+                assert_eq!(set(&latest, a.range), set(&of_delta, b.range));
+                let own: Vec<u32> = set(&latest, a.range).iter().map(|x| x.0).collect();
+                assert!(own.iter().all(|&s| f.pos[s as usize][0].to_bits()
+                    == latest.xyz[0][latest.slots.iter().position(|&q| q == s).unwrap()].to_bits()));
+            }
+        }
     }
 
     #[test]

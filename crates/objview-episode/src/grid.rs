@@ -311,7 +311,7 @@ pub struct ChangedBlocks {
     /// Slots by group, each group padded with NONE to whole lanes.
     pub(crate) slots: Vec<u32>,
     /// Their positions by coordinate (padding at +∞).
-    xyz: [Vec<f64>; 3],
+    pub(crate) xyz: [Vec<f64>; 3],
     /// Domain block index → index into `blocks`, or NONE.
     pub(crate) lookup: Vec<u32>,
 }
@@ -336,9 +336,35 @@ impl ChangedBlocks {
         g
     }
 
-    /// Groups `changed` (slots of `fused`) again, reusing this value's buffers (an episode
-    /// keeps one: no large allocation per step).
-    pub fn rebuild(&mut self, fused: &FusedCloud, changed: &[u32]) {
+    /// Groups the slots changed by `fused`'s latest insertion, reusing this value's buffers
+    /// and reading block-local memory only ([`FusedCloud::latest_changes`]); the same groups as
+    /// [`ChangedBlocks::rebuild`] of its delta.
+    pub fn rebuild_latest(&mut self, fused: &FusedCloud) {
+        self.reset(fused);
+        let (blocks, slots, xyz) = (&mut self.blocks, &mut self.slots, &mut self.xyz);
+        fused.latest_changes(|key, it| {
+            let start = slots.len();
+            let mut aabb = Aabb::EMPTY;
+            for (s, q) in it {
+                slots.push(s);
+                for (c, &x) in xyz.iter_mut().zip(&q) {
+                    c.push(x);
+                }
+                aabb.grow(q);
+            }
+            while (slots.len() - start) % LANES != 0 {
+                slots.push(NONE);
+                for c in xyz.iter_mut() {
+                    c.push(f64::INFINITY);
+                }
+            }
+            blocks.push(ChangedBlock { key, range: (start, slots.len()), aabb });
+        });
+        self.index(fused);
+    }
+
+    /// Clears the groups (and their lookup entries).
+    fn reset(&mut self, fused: &FusedCloud) {
         let n = fused.domain.num_blocks();
         if self.lookup.len() != n {
             self.lookup = vec![NONE; n];
@@ -352,6 +378,21 @@ impl ChangedBlocks {
         self.blocks.clear();
         self.slots.clear();
         self.xyz.iter_mut().for_each(Vec::clear);
+    }
+
+    /// Points the lookup at the groups.
+    fn index(&mut self, fused: &FusedCloud) {
+        for (gi, g) in self.blocks.iter().enumerate() {
+            if let Some(b) = fused.domain.block_index(g.key) {
+                self.lookup[b] = gi as u32;
+            }
+        }
+    }
+
+    /// Groups `changed` (slots of `fused`) again, reusing this value's buffers (an episode
+    /// keeps one: no large allocation per step).
+    pub fn rebuild(&mut self, fused: &FusedCloud, changed: &[u32]) {
+        self.reset(fused);
         let mut v: Vec<(u32, u32)> = changed.iter().map(|&s| (fused.block[s as usize], s)).collect();
         // An insertion's delta is already by block (then voxel); anything else is sorted.
         if v.windows(2).any(|w| w[0].0 > w[1].0) {
@@ -385,11 +426,7 @@ impl ChangedBlocks {
                 aabb,
             });
         }
-        for (gi, g) in self.blocks.iter().enumerate() {
-            if let Some(b) = fused.domain.block_index(g.key) {
-                self.lookup[b] = gi as u32;
-            }
-        }
+        self.index(fused);
     }
 
     /// The nearest changed slot of group `g` to `p`: (d², position in `slots`). The positions

@@ -20,8 +20,8 @@
 
 use crate::fusion::FusedCloud;
 use crate::grid::{
-    block_of, dist2, local_index, nearest_in, Bucketed, ChangedBlocks, Domain, SuperGrid, BLOCK, BLOCK_CELLS,
-    NONE,
+    block_of, dist2, keyed_points, local_index, nearest_in, Bucketed, ChangedBlocks, Domain, SuperGrid,
+    BLOCK, BLOCK_CELLS, NONE,
 };
 use rayon::prelude::*;
 
@@ -90,19 +90,7 @@ impl Targets {
     /// Indexes `points` in `domain` (points outside the domain are an error naming how many).
     /// `cap`: distances at or above it are only known to be "≥ cap" (∞ for exact distances).
     pub fn new(domain: Domain, points: &[[f64; 3]], cap: f64) -> Result<Targets, String> {
-        let mut keyed: Vec<(u32, u32, usize)> = Vec::with_capacity(points.len());
-        let mut outside = 0usize;
-        for (i, &p) in points.iter().enumerate() {
-            let k = domain.key(p);
-            match domain.block_index(block_of(k)) {
-                Some(b) => keyed.push((b as u32, local_index(k) as u32, i)),
-                None => outside += 1,
-            }
-        }
-        if outside > 0 {
-            return Err(format!("{outside} target points lie outside the metric domain"));
-        }
-        keyed.sort_unstable();
+        let keyed = keyed_points(&domain, points)?;
         let mut table = vec![NONE; domain.num_blocks()];
         let mut cell_start: Vec<[u32; BLOCK_CELLS + 1]> = Vec::new();
         let mut supergrid = SuperGrid::new(&domain);

@@ -26,7 +26,7 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use crate::fusion::FusedCloud;
-use crate::grid::{block_box_dist2, block_of, dist2, local_index, ChangedBlocks, Domain, BLOCK, NONE};
+use crate::grid::{block_box_dist2, dist2, keyed_points, ChangedBlocks, Domain, BLOCK, NONE};
 
 /// Safety margin (units²) of the retirement test: a voxel counts as inside the ball only with
 /// this much to spare, so that a centroid rounded an ulp outside its voxel cannot matter.
@@ -85,19 +85,7 @@ impl Coverage {
         if taus.is_empty() || taus.len() > 8 || taus.iter().any(|t| !(t.is_finite() && *t > 0.0)) {
             return Err(format!("coverage radii must be 1 to 8 positive numbers, got {taus:?}"));
         }
-        let mut keyed: Vec<(u32, u32, usize)> = Vec::with_capacity(points.len());
-        let mut outside = 0usize;
-        for (i, &p) in points.iter().enumerate() {
-            let k = domain.key(p);
-            match domain.block_index(block_of(k)) {
-                Some(b) => keyed.push((b as u32, local_index(k) as u32, i)),
-                None => outside += 1,
-            }
-        }
-        if outside > 0 {
-            return Err(format!("{outside} target points lie outside the metric domain"));
-        }
-        keyed.sort_unstable();
+        let keyed = keyed_points(&domain, points)?;
         let pts: Vec<[f64; 3]> = keyed.iter().map(|&(_, _, i)| points[i]).collect();
         let mut blocks = Vec::new();
         let mut live = Vec::new();

@@ -269,6 +269,26 @@ pub fn nearest_in<S: Bucketed>(set: &S, p: [f64; 3], bound2: f64) -> (f64, u32) 
     best
 }
 
+/// `(domain block index, local voxel index, input index)` of every point, sorted (by block,
+/// then voxel, then input order): the layout of the target sets. Points outside `domain` are
+/// an error naming how many.
+pub(crate) fn keyed_points(domain: &Domain, points: &[[f64; 3]]) -> Result<Vec<(u32, u32, usize)>, String> {
+    let mut keyed: Vec<(u32, u32, usize)> = Vec::with_capacity(points.len());
+    let mut outside = 0usize;
+    for (i, &p) in points.iter().enumerate() {
+        let k = domain.key(p);
+        match domain.block_index(block_of(k)) {
+            Some(b) => keyed.push((b as u32, local_index(k) as u32, i)),
+            None => outside += 1,
+        }
+    }
+    if outside > 0 {
+        return Err(format!("{outside} target points lie outside the metric domain"));
+    }
+    keyed.sort_unstable();
+    Ok(keyed)
+}
+
 /// Calls `f` for every block key at Chebyshev distance exactly `r` from `c`.
 pub fn for_each_ring_block(c: [i32; 3], r: i32, mut f: impl FnMut([i32; 3])) {
     if r == 0 {

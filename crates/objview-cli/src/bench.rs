@@ -17,8 +17,9 @@ pub enum Command {
     /// Full difficulty annotation (26-size sweep + exact d_plan) of built-in objects of ~10k and
     /// ~100k triangles: time per stage with one thread and all threads, peak memory.
     Annotate(AnnotateBenchArgs),
-    /// One episode step in the environment (render + fusion + metrics) on a ~100k-triangle
-    /// object with a ~300k-point ground truth, and RSE / RSE-Mov planning time per step.
+    /// One episode step in the environment (render + fusion + SC/NSC + MS; the checkpoint CD
+    /// reported separately) on a ~100k-triangle object with a ~300k-point ground truth, and
+    /// RSE / RSE-Mov planning time per step.
     Episode(crate::bench_episode::EpisodeBenchArgs),
     /// How much d_plan, d_sat and r_vis move when the sampled ground-truth cloud is re-drawn
     /// with other seeds, on the built-in pool.

@@ -233,7 +233,26 @@ impl Targets {
         // Far targets: minimum with the changed slots, or a full search if their slot moved.
         // Both are pure per-target computations (run in parallel on the current rayon pool,
         // which helps a lone long episode), applied afterwards in target order.
-        let far = std::mem::take(&mut self.far);
+        // Far targets with no nearest slot yet (nothing was fused near them): a nearest search
+        // of the whole cloud, whose superblock index prunes far better than the changed-slot
+        // groups when every slot is new to them (the first update of an episode's CD).
+        let (fresh, far): (Vec<u32>, Vec<u32>) = std::mem::take(&mut self.far)
+            .into_iter()
+            .partition(|&i| self.nn[i as usize] == NONE && self.mark[i as usize] != self.epoch);
+        if !fresh.is_empty() && !changed.is_empty() {
+            let this = &*self;
+            let found: Vec<(f64, u32)> = fresh
+                .par_iter()
+                .with_min_len(256)
+                .map(|&i| fused.nearest(this.ix.pts[i as usize], this.cap2))
+                .collect();
+            for (&i, &(d, s)) in fresh.iter().zip(&found) {
+                if s != NONE {
+                    self.d2[i as usize] = d;
+                    self.nn[i as usize] = s;
+                }
+            }
+        }
         if !far.is_empty() && !changed.is_empty() {
             let groups = ChangedBlocks::new(fused, changed);
             // Far targets are sorted by block: one group per target block.
@@ -274,14 +293,15 @@ impl Targets {
         }
         // The next far list: previous far targets and recomputed ones still farther than h.
         let mut next: Vec<u32> =
-            far.into_iter().chain(recompute).filter(|&i| self.d2[i as usize] > h2).collect();
+            far.into_iter().chain(fresh).chain(recompute).filter(|&i| self.d2[i as usize] > h2).collect();
         next.sort_unstable();
         next.dedup();
         self.far = next;
-        // Fused→target: exact when the push found a target within h (anything else is ≥ h).
+        // Fused→target: exact when the push found a target within h (anything else is ≥ h);
+        // otherwise a search bounded by the nearest target the push saw (∞ when none).
         for (m, &s) in slot_min.iter_mut().zip(changed) {
             if *m > h2 {
-                *m = self.nearest_d2(fused.pos[s as usize]);
+                *m = nearest_in(self, fused.pos[s as usize], *m).0;
             }
         }
         slot_min

@@ -26,7 +26,7 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use crate::fusion::FusedCloud;
-use crate::grid::{block_box_dist2, dist2, keyed_points, ChangedBlocks, Domain, BLOCK, NONE};
+use crate::grid::{dist2, keyed_points, ChangedBlocks, Domain, NONE};
 
 /// Safety margin (units²) of the retirement test: a voxel counts as inside the ball only with
 /// this much to spare, so that a centroid rounded an ulp outside its voxel cannot matter.
@@ -206,24 +206,8 @@ impl Coverage {
     fn block_changes(&self, fused: &FusedCloud, groups: &ChangedBlocks, tb: u32) -> Vec<Change> {
         let domain = &self.ix.domain;
         let (key, _, _) = self.ix.blocks[tb as usize];
-        let e = domain.h * BLOCK as f64;
-        let reach = (self.r2.sqrt() / e).ceil() as i32;
         let mut cand: Vec<(f64, usize)> = Vec::new();
-        for dz in -reach..=reach {
-            for dy in -reach..=reach {
-                for dx in -reach..=reach {
-                    let b = [key[0] + dx, key[1] + dy, key[2] + dz];
-                    let Some(bi) = domain.block_index(b) else { continue };
-                    let gi = groups.lookup[bi];
-                    if gi != NONE {
-                        let lb = block_box_dist2(domain, key, b);
-                        if lb < self.r2 {
-                            cand.push((lb, gi as usize));
-                        }
-                    }
-                }
-            }
-        }
+        groups.candidates(domain, key, self.r2, &mut cand);
         let mut out = Vec::new();
         if cand.is_empty() {
             // No changed slot within τ_max of this block: nothing in it can change.

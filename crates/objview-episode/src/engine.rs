@@ -231,7 +231,7 @@ impl Episode {
             renderer: Renderer::new(),
             frame: Frame::empty(cam),
             points: Vec::new(),
-            groups: ChangedBlocks::new(&FusedCloud::new(scene.domain.clone()), &[]),
+            groups: ChangedBlocks::default(),
             started,
             scene,
             settings,

@@ -60,6 +60,10 @@ pub struct FusedCloud {
     /// The blocks the latest insertion changed, as (domain index, allocation index), by domain
     /// index: [`FusedCloud::latest_changes`].
     latest: Vec<(u32, u32)>,
+    /// Buffers of [`FusedCloud::insert`] kept between insertions (each ~80k entries per view):
+    /// every point's (block, voxel), and the point indices by block.
+    at: Vec<(u32, u16)>,
+    order: Vec<u32>,
 }
 
 /// A voxel's sum and count of the current insertion's points, and its first point.
@@ -97,6 +101,8 @@ impl FusedCloud {
             epoch: 0,
             scratch: Box::new([Accum::default(); BLOCK_CELLS]),
             latest: Vec::new(),
+            at: Vec::new(),
+            order: Vec::new(),
         }
     }
 
@@ -156,7 +162,8 @@ impl FusedCloud {
         let epoch = self.epoch;
         let mut delta = FusionDelta::default();
         // Pass 1: each point's block (allocated on first use) and voxel; per-block counts.
-        let mut at: Vec<(u32, u16)> = Vec::with_capacity(points.len());
+        let mut at = std::mem::take(&mut self.at);
+        at.clear();
         let mut touched: Vec<u32> = Vec::new();
         let mut last: (usize, u32) = (usize::MAX, NONE);
         for &p in points {
@@ -203,7 +210,9 @@ impl FusedCloud {
             blk.bucket = offset;
             offset += n;
         }
-        let mut order = vec![0u32; offset as usize];
+        let mut order = std::mem::take(&mut self.order);
+        order.clear();
+        order.resize(offset as usize, 0);
         for (i, &(t, _)) in at.iter().enumerate() {
             if t != NONE {
                 let blk = &mut self.blocks[t as usize];
@@ -295,6 +304,8 @@ impl FusedCloud {
             }
         }
         self.latest = by_domain;
+        self.at = at;
+        self.order = order;
         delta
     }
 
@@ -394,7 +405,7 @@ mod tests {
         use crate::grid::ChangedBlocks;
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
         let mut f = FusedCloud::new(domain());
-        let mut latest = ChangedBlocks::new(&f, &[]);
+        let mut latest = ChangedBlocks::default();
         for _ in 0..5 {
             let pts: Vec<[f64; 3]> = (0..4000)
                 .map(|_| [rng.gen_range(-0.2..0.2), rng.gen_range(-0.2..0.2), rng.gen_range(-0.05..0.05)])

@@ -326,6 +326,7 @@ pub(crate) const LANES: usize = 4;
 
 /// The slots changed by one insertion, grouped by block, with each group's box and its
 /// positions laid out for a vectorized nearest scan (the coverage updates' input).
+#[derive(Default)]
 pub struct ChangedBlocks {
     pub(crate) blocks: Vec<ChangedBlock>,
     /// Slots by group, each group padded with NONE to whole lanes.
@@ -346,12 +347,7 @@ pub(crate) struct ChangedBlock {
 impl ChangedBlocks {
     /// Groups `changed` (slots of `fused`).
     pub fn new(fused: &FusedCloud, changed: &[u32]) -> ChangedBlocks {
-        let mut g = ChangedBlocks {
-            blocks: Vec::new(),
-            slots: Vec::new(),
-            xyz: Default::default(),
-            lookup: Vec::new(),
-        };
+        let mut g = ChangedBlocks::default();
         g.rebuild(fused, changed);
         g
     }
@@ -361,26 +357,29 @@ impl ChangedBlocks {
     /// [`ChangedBlocks::rebuild`] of its delta.
     pub fn rebuild_latest(&mut self, fused: &FusedCloud) {
         self.reset(fused);
-        let (blocks, slots, xyz) = (&mut self.blocks, &mut self.slots, &mut self.xyz);
-        fused.latest_changes(|key, it| {
-            let start = slots.len();
-            let mut aabb = Aabb::EMPTY;
-            for (s, q) in it {
-                slots.push(s);
-                for (c, &x) in xyz.iter_mut().zip(&q) {
-                    c.push(x);
-                }
-                aabb.grow(q);
-            }
-            while (slots.len() - start) % LANES != 0 {
-                slots.push(NONE);
-                for c in xyz.iter_mut() {
-                    c.push(f64::INFINITY);
-                }
-            }
-            blocks.push(ChangedBlock { key, range: (start, slots.len()), aabb });
-        });
+        fused.latest_changes(|key, it| self.push_group(key, it));
         self.index(fused);
+    }
+
+    /// Appends one group: block `key` and its slots with their positions, padded to whole
+    /// lanes with points at infinity (never nearest).
+    fn push_group(&mut self, key: [i32; 3], slots: impl IntoIterator<Item = (u32, [f64; 3])>) {
+        let start = self.slots.len();
+        let mut aabb = Aabb::EMPTY;
+        for (s, q) in slots {
+            self.slots.push(s);
+            for (c, &x) in self.xyz.iter_mut().zip(&q) {
+                c.push(x);
+            }
+            aabb.grow(q);
+        }
+        while (self.slots.len() - start) % LANES != 0 {
+            self.slots.push(NONE);
+            for c in self.xyz.iter_mut() {
+                c.push(f64::INFINITY);
+            }
+        }
+        self.blocks.push(ChangedBlock { key, range: (start, self.slots.len()), aabb });
     }
 
     /// Clears the groups (and their lookup entries).
@@ -418,33 +417,9 @@ impl ChangedBlocks {
         if v.windows(2).any(|w| w[0].0 > w[1].0) {
             v.sort_unstable();
         }
-        let (blocks, slots, xyz) = (&mut self.blocks, &mut self.slots, &mut self.xyz);
-        let mut i = 0;
-        while i < v.len() {
-            let b = v[i].0;
-            let start = slots.len();
-            let mut aabb = Aabb::EMPTY;
-            while i < v.len() && v[i].0 == b {
-                let q = fused.pos[v[i].1 as usize];
-                slots.push(v[i].1);
-                for (c, &x) in xyz.iter_mut().zip(&q) {
-                    c.push(x);
-                }
-                aabb.grow(q);
-                i += 1;
-            }
-            // Pad to whole lanes with points at infinity (never nearest).
-            while (slots.len() - start) % LANES != 0 {
-                slots.push(NONE);
-                for c in xyz.iter_mut() {
-                    c.push(f64::INFINITY);
-                }
-            }
-            blocks.push(ChangedBlock {
-                key: fused.domain.block_key(b as usize),
-                range: (start, slots.len()),
-                aabb,
-            });
+        for run in v.chunk_by(|a, b| a.0 == b.0) {
+            let key = fused.domain.block_key(run[0].0 as usize);
+            self.push_group(key, run.iter().map(|&(_, s)| (s, fused.pos[s as usize])));
         }
         self.index(fused);
     }
@@ -484,7 +459,8 @@ impl ChangedBlocks {
     /// bound: by dense lookup of the blocks around `tb` when that is cheaper than a scan.
     pub(crate) fn candidates(&self, domain: &Domain, tb: [i32; 3], max_d2: f64, out: &mut Vec<(f64, usize)>) {
         let e = domain.h * BLOCK as f64;
-        let reach = if max_d2.is_finite() { (max_d2.sqrt() / e).ceil() as i64 + 1 } else { i64::MAX };
+        // A block `reach + 1` blocks away along an axis is at least `reach · e ≥ √max_d2` away.
+        let reach = if max_d2.is_finite() { (max_d2.sqrt() / e).ceil() as i64 } else { i64::MAX };
         let side = reach.saturating_mul(2).saturating_add(1);
         let volume = side.saturating_mul(side).saturating_mul(side);
         if volume < self.blocks.len() as i64 {

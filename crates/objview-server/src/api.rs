@@ -8,7 +8,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use axum::body::Bytes;
-use axum::extract::{DefaultBodyLimit, FromRequest, FromRequestParts, Request, State};
+use axum::extract::{FromRequest, FromRequestParts, Request, State};
 use axum::http::header::{HeaderName, HeaderValue, CONTENT_TYPE};
 use axum::http::request::Parts;
 use axum::http::{HeaderMap, StatusCode};
@@ -20,7 +20,9 @@ use serde_json::{json, Value};
 
 use crate::auth::Caller;
 use crate::error::ApiError;
-use crate::protocol::{BODY_LIMIT, CANDIDATE_SETS, MAX_FEASIBLE_POSES, STEP_HEADER, VIEW_SPACES};
+use crate::protocol::{
+    BODY_LIMIT, CANDIDATE_SETS, DRAIN_LIMIT, MAX_FEASIBLE_POSES, STEP_HEADER, VIEW_SPACES,
+};
 use crate::request::CreateSpec;
 use crate::state::{AppState, Slot};
 
@@ -47,7 +49,6 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/v1/methods/{method}/results", get(method_results))
         .fallback(unknown_route)
         .method_not_allowed_fallback(wrong_method)
-        .layer(DefaultBodyLimit::max(BODY_LIMIT))
         .with_state(state)
 }
 
@@ -70,24 +71,52 @@ impl FromRequest<Arc<AppState>> for Body {
         let limit = state.limits.body_timeout;
         // While the body arrives, the connection may be closed to make room for another.
         let receiving = req.extensions().get::<crate::conn::ConnHandle>().map(|c| c.receiving_body());
-        let read = tokio::time::timeout(limit, Bytes::from_request(req, state)).await;
+        let read = tokio::time::timeout(limit, read_limited(req)).await;
         drop(receiving);
-        let bytes = read
-            .map_err(|_| {
-                ApiError::RequestTimeout(format!(
-                    "the body did not arrive within {} s (--body-timeout)",
-                    limit.as_secs_f64()
-                ))
-            })?
-            .map_err(|e| {
-                if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
-                    ApiError::PayloadTooLarge(format!("the body is over the limit of {BODY_LIMIT} bytes"))
-                } else {
-                    ApiError::MalformedJson(format!("the body could not be read: {e}"))
-                }
-            })?;
+        let bytes = read.map_err(|_| {
+            ApiError::RequestTimeout(format!(
+                "the body did not arrive within {} s (--body-timeout)",
+                limit.as_secs_f64()
+            ))
+        })??;
         parse_body(&bytes).map(Body)
     }
+}
+
+/// Reads a request body of at most [`BODY_LIMIT`] bytes. A longer one is 413; it is read on
+/// and discarded up to [`DRAIN_LIMIT`] first (so a client still writing it is not cut off
+/// before it can read the answer), unless its announced length is beyond that already.
+async fn read_limited(req: Request) -> Result<Bytes, ApiError> {
+    use hyper::body::Body as _;
+    let too_large = || ApiError::PayloadTooLarge(format!("the body is over the limit of {BODY_LIMIT} bytes"));
+    let announced = req
+        .headers()
+        .get(axum::http::header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok());
+    if announced.is_some_and(|n| n > DRAIN_LIMIT as u64) {
+        return Err(too_large());
+    }
+    let mut body = req.into_body();
+    let mut kept: Vec<u8> = Vec::new();
+    let mut seen = 0usize;
+    loop {
+        let frame = std::future::poll_fn(|cx| std::pin::Pin::new(&mut body).poll_frame(cx)).await;
+        let Some(frame) = frame else { break };
+        let frame = frame.map_err(|e| ApiError::MalformedJson(format!("the body could not be read: {e}")))?;
+        let Ok(data) = frame.into_data() else { continue };
+        seen = seen.saturating_add(data.len());
+        if seen > DRAIN_LIMIT {
+            return Err(too_large());
+        }
+        if seen <= BODY_LIMIT {
+            kept.extend_from_slice(&data);
+        }
+    }
+    if seen > BODY_LIMIT {
+        return Err(too_large());
+    }
+    Ok(Bytes::from(kept))
 }
 
 /// Whether a parse error is serde_json's "number out of range": JSON syntax that is fine, with a

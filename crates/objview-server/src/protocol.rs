@@ -21,5 +21,11 @@ pub const MAX_FEASIBLE_POSES: usize = 4_096;
 /// The request body limit (1 MiB).
 pub const BODY_LIMIT: usize = 1 << 20;
 
+/// How much of an oversized body the server still reads (and discards) before it answers 413,
+/// so that a client that writes its whole body before reading (most blocking HTTP clients do)
+/// gets the 413 instead of a broken pipe. A body announced or sent beyond this is answered at
+/// once and its connection closed.
+pub const DRAIN_LIMIT: usize = 16 << 20;
+
 /// The header that carries the step of a depth or RGB observation.
 pub const STEP_HEADER: &str = "x-objview-step";

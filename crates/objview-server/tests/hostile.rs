@@ -380,3 +380,29 @@ fn hostile_requests_get_their_errors_and_nothing_hidden_leaks() {
     assert_eq!(all.lines().count(), 1);
     assert!(!all.contains("null"), "{all}");
 }
+
+#[test]
+fn an_oversized_body_gets_its_413_before_the_connection_closes() {
+    let (s, _tmp) = start_with(|_| {});
+    let c = client(&s);
+    let created = create(&c, &create_body("cube", "whole", json!("auto")));
+    let feas = format!("/v1/episodes/{}/feasible", created["episode_id"].as_str().unwrap());
+    // 4 MiB: more than loopback socket buffers hold, so a server that answered without reading
+    // would cut the client off mid-write (a broken pipe instead of the answer).
+    let big = format!("{{\"poses\": [{}]}}", vec!["[3,0,0,0,0,0,0]"; 4 << 16].join(","));
+    assert!(big.len() > 4 << 20);
+    for _ in 0..5 {
+        assert_error(&post_bytes(&c, &feas, big.as_bytes()), 413, "payload_too_large");
+        // The connection that carried it stays usable.
+        assert_eq!(get(&c, "/v1/health").status, 200);
+    }
+    // A body announced beyond what the server drains: answered at once, and closed.
+    let mut raw = connect(s.addr);
+    raw.write_all(
+        b"POST /v1/episodes HTTP/1.1\r\nHost: objview\r\nContent-Type: application/json\r\nContent-Length: 1000000000\r\n\r\n{",
+    )
+    .unwrap();
+    let (status, body) = read_response(&mut raw).expect("an answer before the body");
+    assert_eq!(status, 413, "{}", String::from_utf8_lossy(&body));
+    assert!(closed_within(&mut raw, Duration::from_secs(5)).is_some());
+}

@@ -46,7 +46,7 @@ pub use scene::{load_scene, scene_from_parts, SceneSource};
 pub use scripted::Scripted;
 pub use settings::EpisodeSettings;
 pub use validate::{check_pose, check_view_pose, PoseError, MAX_POSE_DISTANCE};
-pub use vocab::{Budget, CheckpointKey, ExecutionMode, Family, StopReason, TerminalSource};
+pub use vocab::{ends_normally, Budget, CheckpointKey, ExecutionMode, Family, StopReason, TerminalSource};
 
 /// Errors of episode set-up (a running episode never fails: it ends with a terminal reason).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -317,6 +317,25 @@ impl FromStr for TerminalSource {
     }
 }
 
+/// The reasons with which the benchmark ends an episode that went as it should (source
+/// `benchmark`): the cap, an iterative planner's `enough_info`, a finite plan reaching its budget.
+/// The benchmark's other reason, `invalid_action`, is the planner's fault.
+pub const NORMAL_BENCHMARK_ENDS: [&str; 3] = ["max_cap_reached", "enough_info", "budget_reached"];
+
+/// Whether an episode that ended with `source` / `reason` ended normally: the planner stopped
+/// with a valid stop reason (`algorithm_stop`: `plan_end`, `candidate_exhausted`, …), or the
+/// benchmark ended it at a limit ([`NORMAL_BENCHMARK_ENDS`]). Every other end is a failure: an
+/// `exception` of any reason (`planner_error`, `timeout`, `interrupted`, an abort), an
+/// `invalid_action`, a reason this vocabulary does not know. `objview report` and the server
+/// prefer a normal end among duplicate runs of one episode.
+pub fn ends_normally(source: TerminalSource, reason: &str) -> bool {
+    match source {
+        TerminalSource::AlgorithmStop => StopReason::parse(reason).is_some(),
+        TerminalSource::Benchmark => NORMAL_BENCHMARK_ENDS.contains(&reason),
+        TerminalSource::Exception => false,
+    }
+}
+
 /// A τ (or an MS resolution δ) written as a key: two decimals (`0.02` → `"0.02"`). Per-τ maps
 /// of results (`sc`, `nsc`, `ms_voxels`, `observable_sc`) are keyed by it, and so is
 /// [`CheckpointKey::Stabilized`].
@@ -474,6 +493,25 @@ mod tests {
         assert_eq!(names(keys.map(|k| k.to_string()).to_vec()), "K=5 MS@0.02 terminal");
         assert_eq!(CheckpointKey::Stabilized(0.1).to_string(), "MS@0.10", "two decimals, as tau_key");
         assert_eq!(tau_key(0.025), format!("{:.2}", 0.025));
+    }
+
+    #[test]
+    fn only_valid_stops_and_the_benchmark_limits_are_normal_ends() {
+        use TerminalSource::{AlgorithmStop, Benchmark, Exception};
+        for r in ["plan_end", "candidate_exhausted", "next_view_visited", "next_view_infeasible"] {
+            assert!(ends_normally(AlgorithmStop, r), "{r}");
+            assert!(!ends_normally(Exception, r), "{r}");
+        }
+        for r in ["max_cap_reached", "enough_info", "budget_reached"] {
+            assert!(ends_normally(Benchmark, r), "{r}");
+            assert!(!ends_normally(AlgorithmStop, r), "{r}");
+        }
+        assert!(!ends_normally(Benchmark, "invalid_action"));
+        for r in ["planner_error", "timeout", "interrupted", "aborted", "max_cap_reached"] {
+            assert!(!ends_normally(Exception, r), "{r}");
+        }
+        assert!(!ends_normally(AlgorithmStop, "gave_up"));
+        assert!(!ends_normally(Benchmark, "aborted"));
     }
 
     #[test]

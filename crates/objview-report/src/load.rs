@@ -16,10 +16,19 @@
 //! hostile client's result, a hand edit) does not take the rest of the file with it. A torn last
 //! line (no trailing newline and not JSON: an interrupted run) is skipped with a warning.
 //!
-//! Duplicates: the same (uid, method, view space, budget, seed) seen twice keeps the last one.
+//! Duplicates: of the episode results with the same (uid, method, view space, budget, seed), one
+//! is kept. A run that *ended normally* always beats one that did not, wherever the lines are;
+//! among runs of the same rank the last line wins. Normal ends are
+//! [`objview_episode::ends_normally`]: the planner's own stop (`plan_end`, `candidate_exhausted`,
+//! `next_view_visited`, `next_view_infeasible`) or the benchmark's limits (`max_cap_reached`,
+//! `enough_info`, `budget_reached`); everything else is a failed run — an `exception`
+//! (`planner_error`, `timeout`, `interrupted`, a server abort), an `invalid_action`, an unknown
+//! reason. So a completed run followed by an aborted or timed-out re-run keeps the completed
+//! one, and so does an aborted run followed by a completed one; two completed runs keep the later.
 //! An iterative planner runs once and serves every budget setting (SPEC §5), so iterative runs of
-//! the same (uid, method, view space, seed) under several budget labels are also collapsed, to the
-//! run with the most views (the later one on a tie); both cases are listed as warnings.
+//! the same (uid, method, view space, seed) under several budget labels are also collapsed: a
+//! normal end first again, then the most views, then the later line. Both cases are listed as
+//! warnings (with the dropped and kept runs' terminal reasons in `report.json`).
 //!
 //! The kept episodes are sorted by (uid, method, view space, seed, budget, source), so that means
 //! do not depend on how shards were concatenated.
@@ -150,10 +159,12 @@ impl LineKeys {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DuplicateKind {
-    /// Same (uid, method, view space, budget, seed): the last one is kept.
+    /// Same (uid, method, view space, budget, seed): a run that ended normally is kept over one
+    /// that failed, else the last one.
     SameKey,
     /// An iterative run of the same (uid, method, view space, seed) under another budget label:
-    /// the run with the most views is kept.
+    /// a run that ended normally is kept over one that failed, else the run with the most views
+    /// (the later one on a tie).
     IterativeBudgets,
 }
 
@@ -176,6 +187,13 @@ pub struct Duplicate {
     pub kept: Source,
     /// The episode dropped.
     pub dropped: Source,
+    /// The kept episode's terminal reason.
+    pub kept_terminal: String,
+    /// The dropped episode's terminal reason.
+    pub dropped_terminal: String,
+    /// Whether the kept episode won because it ended normally and the dropped one did not
+    /// (rather than by being the later line or having more views).
+    pub failed_run_dropped: bool,
 }
 
 /// Everything read from the results files.
@@ -500,44 +518,62 @@ fn duplicate(kind: DuplicateKind, kept: &Episode, dropped: &Episode) -> Duplicat
         seed: r.seed,
         kept: kept.source,
         dropped: dropped.source,
+        kept_terminal: kept.result.terminal_reason.clone(),
+        dropped_terminal: r.terminal_reason.clone(),
+        failed_run_dropped: ended_normally(kept) && !ended_normally(dropped),
     }
+}
+
+/// Whether the episode ended normally ([`objview_episode::ends_normally`]).
+fn ended_normally(e: &Episode) -> bool {
+    objview_episode::ends_normally(e.result.terminal_source, &e.result.terminal_reason)
+}
+
+/// Of the episodes `group` (indices into `raw`), the one `rank` puts highest — the later line
+/// on a tie — and a [`Duplicate`] for each of the others.
+fn keep_best<R: Ord>(
+    raw: &[Episode],
+    group: &[usize],
+    kind: DuplicateKind,
+    rank: impl Fn(&Episode) -> R,
+    duplicates: &mut Vec<Duplicate>,
+) -> usize {
+    let best = group.iter().copied().max_by_key(|&i| (rank(&raw[i]), raw[i].source)).expect("a group");
+    for &i in group.iter().filter(|&&i| i != best) {
+        duplicates.push(duplicate(kind, &raw[best], &raw[i]));
+    }
+    best
 }
 
 /// The two duplicate rules of the module docs.
 fn deduplicate(raw: Vec<Episode>) -> (Vec<Episode>, Vec<Duplicate>) {
     let mut duplicates = Vec::new();
-    // Same key: the last one wins.
-    let mut last: BTreeMap<(String, String, String, String, u64), usize> = BTreeMap::new();
+    // Same key: a normal end first, then the last line.
+    let mut same: BTreeMap<(String, String, String, String, u64), Vec<usize>> = BTreeMap::new();
     for (i, e) in raw.iter().enumerate() {
         let r = &e.result;
         let key = (r.uid.clone(), r.method.clone(), r.view_space.clone(), r.budget.to_string(), r.seed);
-        if let Some(prev) = last.insert(key, i) {
-            duplicates.push(duplicate(DuplicateKind::SameKey, e, &raw[prev]));
+        same.entry(key).or_default().push(i);
+    }
+    let kept: BTreeSet<usize> = same
+        .values()
+        .map(|g| keep_best(&raw, g, DuplicateKind::SameKey, ended_normally, &mut duplicates))
+        .collect();
+    // Iterative runs under several budgets: a normal end first, then the most views, then the
+    // later line.
+    let mut iterative: BTreeMap<(String, String, String, u64), Vec<usize>> = BTreeMap::new();
+    for &i in &kept {
+        let r = &raw[i].result;
+        if r.execution_mode == ExecutionMode::Iterative {
+            let key = (r.uid.clone(), r.method.clone(), r.view_space.clone(), r.seed);
+            iterative.entry(key).or_default().push(i);
         }
     }
-    let kept: BTreeSet<usize> = last.into_values().collect();
-    // Iterative runs under several budgets: the most views win, the later on a tie.
-    let mut best: BTreeMap<(String, String, String, u64), usize> = BTreeMap::new();
     let mut dropped = BTreeSet::new();
-    for &i in &kept {
-        let e = &raw[i];
-        if e.result.execution_mode != ExecutionMode::Iterative {
-            continue;
-        }
-        let r = &e.result;
-        let key = (r.uid.clone(), r.method.clone(), r.view_space.clone(), r.seed);
-        match best.get(&key).copied() {
-            None => {
-                best.insert(key, i);
-            }
-            Some(j) => {
-                let newer_wins = (terminal_views(e), e.source) > (terminal_views(&raw[j]), raw[j].source);
-                let (win, lose) = if newer_wins { (i, j) } else { (j, i) };
-                duplicates.push(duplicate(DuplicateKind::IterativeBudgets, &raw[win], &raw[lose]));
-                dropped.insert(lose);
-                best.insert(key, win);
-            }
-        }
+    for g in iterative.values().filter(|g| g.len() > 1) {
+        let rank = |e: &Episode| (ended_normally(e), terminal_views(e));
+        let best = keep_best(&raw, g, DuplicateKind::IterativeBudgets, rank, &mut duplicates);
+        dropped.extend(g.iter().copied().filter(|&i| i != best));
     }
     duplicates.sort_by_key(|d| d.dropped);
     let episodes =

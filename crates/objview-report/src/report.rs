@@ -284,19 +284,31 @@ pub fn build_report(
     for f in loaded.files.iter().filter(|f| f.torn_last_line) {
         warnings.push(format!("{}: torn last line skipped (an interrupted run).", f.path.display()));
     }
+    let failed_dropped = |k: DuplicateKind| {
+        let n = loaded.duplicates.iter().filter(|d| d.kind == k && d.failed_run_dropped).count();
+        if n == 0 {
+            String::new()
+        } else {
+            format!(" ({n} of them a failed run dropped for a normal one)")
+        }
+    };
     if counts.duplicates_same_key > 0 {
         warnings.push(format!(
-            "Duplicate episodes (same uid, method, view space, budget, seed): {}; the last line is kept \
-             (pairs in report.json).",
-            counts.duplicates_same_key
+            "Duplicate episodes (same uid, method, view space, budget, seed): {}{}; a run that ended \
+             normally (a planner stop, enough_info, the cap or the budget) is kept over one that failed \
+             (an exception such as planner_error, timeout or interrupted, an abort, an invalid action), \
+             else the last line (pairs in report.json).",
+            counts.duplicates_same_key,
+            failed_dropped(DuplicateKind::SameKey)
         ));
     }
     if counts.duplicates_iterative_budgets > 0 {
         warnings.push(format!(
-            "Iterative runs repeated under another budget label (same uid, method, view space, seed): {}; \
-             an iterative run serves every setting, so the run with the most views is kept (pairs in \
-             report.json).",
-            counts.duplicates_iterative_budgets
+            "Iterative runs repeated under another budget label (same uid, method, view space, seed): {}{}; \
+             an iterative run serves every setting, so a run that ended normally is kept over one that \
+             failed, else the run with the most views (pairs in report.json).",
+            counts.duplicates_iterative_budgets,
+            failed_dropped(DuplicateKind::IterativeBudgets)
         ));
     }
     for ((method, mode, budget), n) in &unused {

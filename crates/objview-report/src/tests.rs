@@ -723,3 +723,103 @@ fn torn_last_lines_are_skipped_and_iterative_budgets_collapse() {
         r.warnings
     );
 }
+
+/// Loads `specs` as one results file, in order.
+fn load_specs(specs: &[Spec]) -> crate::load::Loaded {
+    let dir = tempfile::tempdir().unwrap();
+    let lines: Vec<String> = specs.iter().map(Spec::line).collect();
+    let path = write_lines(dir.path(), "r.jsonl", &lines);
+    crate::load::load_results(&[path], "0.02").unwrap()
+}
+
+#[test]
+fn a_completed_run_beats_a_failed_duplicate_before_or_after_it() {
+    let done = Spec { reason: "plan_end", last: 6, ..Spec::new("o1", "alpha") };
+    for failed_reason in ["planner_error", "timeout", "interrupted", "invalid_action", "aborted"] {
+        let failed = Spec { reason: failed_reason, last: 3, ..done.clone() };
+        // Completed, then a failed re-run: the completed one (line 1) stays.
+        let l = load_specs(&[done.clone(), failed.clone()]);
+        assert_eq!(l.episodes.len(), 1, "{failed_reason}");
+        assert_eq!(l.episodes[0].result.terminal_reason, "plan_end", "{failed_reason}");
+        assert_eq!((l.episodes[0].source.line, l.episodes[0].result.visited_poses.len()), (1, 7));
+        let d = &l.duplicates[..];
+        assert_eq!(d.len(), 1);
+        assert_eq!((d[0].kept.line, d[0].dropped.line, d[0].failed_run_dropped), (1, 2, true));
+        assert_eq!(
+            (d[0].kept_terminal.as_str(), d[0].dropped_terminal.as_str()),
+            ("plan_end", failed_reason)
+        );
+        // A failed run, then a completed one: the completed one (line 2) stays.
+        let l = load_specs(&[failed.clone(), done.clone()]);
+        assert_eq!(l.episodes.len(), 1);
+        assert_eq!(
+            (l.episodes[0].source.line, l.episodes[0].result.terminal_reason.as_str()),
+            (2, "plan_end")
+        );
+        assert_eq!((l.duplicates[0].kept.line, l.duplicates[0].dropped.line), (2, 1));
+    }
+}
+
+#[test]
+fn among_runs_of_one_rank_the_last_line_wins() {
+    let first = Spec { reason: "plan_end", last: 6, ..Spec::new("o1", "alpha") };
+    let second = Spec { reason: "candidate_exhausted", last: 4, ..first.clone() };
+    let l = load_specs(&[first.clone(), second.clone()]);
+    assert_eq!(l.episodes.len(), 1);
+    assert_eq!(
+        (l.episodes[0].source.line, l.episodes[0].result.terminal_reason.as_str()),
+        (2, "candidate_exhausted")
+    );
+    assert!(!l.duplicates[0].failed_run_dropped);
+    // Two failed runs: the later one too.
+    let a = Spec { reason: "timeout", ..first.clone() };
+    let b = Spec { reason: "planner_error", ..first.clone() };
+    let l = load_specs(&[a, b]);
+    assert_eq!(
+        (l.episodes[0].source.line, l.episodes[0].result.terminal_reason.as_str()),
+        (2, "planner_error")
+    );
+    // Three lines, completed in the middle: it beats both failed runs around it.
+    let l = load_specs(&[
+        Spec { reason: "timeout", ..first.clone() },
+        first.clone(),
+        Spec { reason: "interrupted", ..first.clone() },
+    ]);
+    assert_eq!((l.episodes.len(), l.episodes[0].source.line), (1, 2));
+    let pairs: Vec<(usize, usize)> = l.duplicates.iter().map(|d| (d.dropped.line, d.kept.line)).collect();
+    assert_eq!(pairs, [(1, 2), (3, 2)]);
+}
+
+#[test]
+fn an_iterative_run_that_failed_loses_to_a_completed_one_with_fewer_views() {
+    // Iterative runs of one episode under two budget labels: the failed one has more views.
+    let done = Spec { reason: "enough_info", last: 8, budget: "5", ..Spec::new("o1", "alpha") };
+    let failed = Spec { reason: "timeout", last: 20, budget: "auto", ..done.clone() };
+    for order in [[done.clone(), failed.clone()], [failed.clone(), done.clone()]] {
+        let l = load_specs(&order);
+        assert_eq!(l.episodes.len(), 1);
+        assert_eq!(l.episodes[0].result.terminal_reason, "enough_info");
+        assert_eq!(l.duplicates[0].kind, crate::load::DuplicateKind::IterativeBudgets);
+        assert!(l.duplicates[0].failed_run_dropped);
+    }
+    // Both completed: the most views, as before.
+    let longer = Spec { reason: "max_cap_reached", ..failed };
+    let l = load_specs(&[longer, done]);
+    assert_eq!(
+        (l.episodes[0].result.terminal_reason.as_str(), l.episodes[0].source.line),
+        ("max_cap_reached", 1)
+    );
+}
+
+#[test]
+fn the_printed_duplicate_note_states_the_rule() {
+    let dir = tempfile::tempdir().unwrap();
+    let done = Spec { reason: "plan_end", ..Spec::new("o1", "alpha") };
+    let lines = [done.line(), Spec { reason: "planner_error", ..done.clone() }.line()];
+    let path = write_lines(dir.path(), "r.jsonl", &lines);
+    let r = build_report(&[path], &[], &ReportSettings::default()).unwrap();
+    let note = r.warnings.iter().find(|w| w.starts_with("Duplicate episodes")).expect("a duplicate note");
+    assert!(note.contains(": 1 (1 of them a failed run dropped for a normal one);"), "{note}");
+    assert!(note.contains("a run that ended normally"), "{note}");
+    assert!(note.contains("else the last line"), "{note}");
+}

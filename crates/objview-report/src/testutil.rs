@@ -110,7 +110,7 @@ impl Spec {
             seed: self.seed,
             start_pose: pose,
             visited_poses: vec![pose; self.last + 1],
-            terminal_source: TerminalSource::AlgorithmStop,
+            terminal_source: source_of(self.reason),
             terminal_reason: self.reason.into(),
             terminal_detail: String::new(),
             steps,
@@ -145,6 +145,17 @@ impl Spec {
         v["execution_mode"] = json!(self.mode);
         v["budget"] = json!(self.budget);
         serde_json::to_string(&v).unwrap()
+    }
+}
+
+/// The terminal source the engine and the server write with `reason` (listed here by hand).
+fn source_of(reason: &str) -> TerminalSource {
+    match reason {
+        "planner_error" | "timeout" | "interrupted" | "aborted" => TerminalSource::Exception,
+        "plan_end" | "candidate_exhausted" | "next_view_visited" | "next_view_infeasible" => {
+            TerminalSource::AlgorithmStop
+        }
+        _ => TerminalSource::Benchmark,
     }
 }
 

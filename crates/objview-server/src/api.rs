@@ -24,7 +24,7 @@ use crate::protocol::{
     BODY_LIMIT, CANDIDATE_SETS, DRAIN_LIMIT, MAX_FEASIBLE_POSES, STEP_HEADER, VIEW_SPACES,
 };
 use crate::request::CreateSpec;
-use crate::state::{AppState, Slot};
+use crate::state::{AppState, EpisodeState, Slot};
 
 /// The router of the whole API over `state`.
 pub fn router(state: Arc<AppState>) -> Router {
@@ -36,7 +36,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/v1/view-spaces", get(view_spaces))
         .route("/v1/candidate-sets", get(candidate_sets))
         .route("/v1/candidate-sets/{name}", get(candidate_set))
-        .route("/v1/episodes", post(create))
+        .route("/v1/episodes", get(list_episodes).post(create))
         .route("/v1/episodes/{id}", get(episode))
         .route("/v1/episodes/{id}/observation", get(observation))
         .route("/v1/episodes/{id}/observation/depth.npy", get(depth))
@@ -49,6 +49,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/v1/methods/{method}/results", get(method_results))
         .fallback(unknown_route)
         .method_not_allowed_fallback(wrong_method)
+        .layer(axum::middleware::from_fn(crate::compress::gzip))
         .with_state(state)
 }
 
@@ -179,6 +180,65 @@ fn step_query(parts: &axum::http::Uri) -> Result<Option<u64>, ApiError> {
     Ok(step)
 }
 
+/// Decodes one query-string component: `%XX` escapes (UTF-8); `+` stays `+` (method names may
+/// hold it, and none holds a space). `None` for a broken escape or bytes that are not UTF-8.
+fn percent_decode(s: &str) -> Option<String> {
+    let b = s.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%' {
+            let hex = std::str::from_utf8(b.get(i + 1..i + 3)?).ok()?;
+            out.push(u8::from_str_radix(hex, 16).ok()?);
+            i += 3;
+        } else {
+            out.push(b[i]);
+            i += 1;
+        }
+    }
+    String::from_utf8(out).ok()
+}
+
+/// The filters of `GET /v1/episodes`: `?state=running|finished` and `?method=NAME`, each at
+/// most once; any other parameter, a repeated one or an unknown state is 422 naming it.
+pub fn list_query(query: Option<&str>) -> Result<(Option<EpisodeState>, Option<String>), ApiError> {
+    let (mut state, mut method) = (None, None);
+    for pair in query.unwrap_or("").split('&').filter(|p| !p.is_empty()) {
+        let (k, v) = pair.split_once('=').unwrap_or((pair, ""));
+        let key = percent_decode(k).unwrap_or_else(|| k.to_string());
+        let value = percent_decode(v).ok_or_else(|| {
+            ApiError::InvalidRequest(format!("`{key}` is not a valid percent-encoded value: {v:?}"))
+        })?;
+        let twice = || ApiError::InvalidRequest(format!("`{key}` is given more than once"));
+        match key.as_str() {
+            "state" => {
+                let s = EpisodeState::parse(&value).ok_or_else(|| {
+                    ApiError::InvalidRequest(format!(
+                        "`state` must be `running` or `finished`, got {value:?}"
+                    ))
+                })?;
+                if state.replace(s).is_some() {
+                    return Err(twice());
+                }
+            }
+            "method" => {
+                if value.is_empty() {
+                    return Err(ApiError::InvalidRequest("`method` is empty".into()));
+                }
+                if method.replace(value).is_some() {
+                    return Err(twice());
+                }
+            }
+            _ => {
+                return Err(ApiError::InvalidRequest(format!(
+                    "unknown query parameter `{key}` (known: `state`, `method`)"
+                )))
+            }
+        }
+    }
+    Ok((state, method))
+}
+
 /// Runs engine work off the async executor once the engine gate lets it in.
 async fn engine<T: Send + 'static>(
     st: &Arc<AppState>,
@@ -258,6 +318,16 @@ async fn create(State(st): State<Arc<AppState>>, c: Caller, Body(body): Body) ->
     Ok((StatusCode::CREATED, Json(v)).into_response())
 }
 
+async fn list_episodes(
+    State(st): State<Arc<AppState>>,
+    c: Caller,
+    uri: axum::http::Uri,
+) -> Result<Json<Value>, ApiError> {
+    let (state, method) = list_query(uri.query())?;
+    let list = blocking(move || st.list(&c.owner, state, method.as_deref())).await?;
+    Ok(Json(json!({ "episodes": list })))
+}
+
 async fn slot_of(st: &Arc<AppState>, c: &Caller, id: &str) -> Result<Arc<Slot>, ApiError> {
     st.slot(&c.owner, id)
 }
@@ -299,18 +369,24 @@ async fn depth(
     let want = step_query(&uri)?;
     let slot = slot_of(&st, &c, &id).await?;
     let (step, depth) = blocking(move || st.depth(&slot, want)).await?;
-    let side = (depth.len() as f64).sqrt() as usize;
-    let shape = if side * side == depth.len() { [side, side] } else { [1, depth.len()] };
-    let mut bytes = objview_geom::npy::npy_header("<f4", &shape);
-    bytes.reserve(depth.len() * 4);
-    for d in depth.iter() {
-        bytes.extend_from_slice(&d.to_le_bytes());
-    }
+    let bytes = depth_npy(&depth);
     let mut h = HeaderMap::new();
     h.insert(CONTENT_TYPE, HeaderValue::from_static("application/octet-stream"));
     let (k, v) = step_header(step);
     h.insert(k, v);
     Ok((h, bytes).into_response())
+}
+
+/// The body of `depth.npy`: NPY `<f4`, (side, side) for a square image (else (1, n)).
+pub fn depth_npy(depth: &[f32]) -> Vec<u8> {
+    let side = (depth.len() as f64).sqrt() as usize;
+    let shape = if side * side == depth.len() { [side, side] } else { [1, depth.len()] };
+    let mut bytes = objview_geom::npy::npy_header("<f4", &shape);
+    bytes.reserve(depth.len() * 4);
+    for d in depth {
+        bytes.extend_from_slice(&d.to_le_bytes());
+    }
+    bytes
 }
 
 async fn rgb(
@@ -494,6 +570,30 @@ mod tests {
         }
         // Tiny numbers round to 0: not out of range.
         assert_eq!(parse_body(b"[1e-400]").unwrap(), json!([0.0]));
+    }
+
+    #[test]
+    fn the_episode_list_takes_a_state_and_a_method_and_names_what_is_wrong() {
+        assert_eq!(list_query(None).unwrap(), (None, None));
+        assert_eq!(list_query(Some("")).unwrap(), (None, None));
+        assert_eq!(list_query(Some("state=running")).unwrap(), (Some(EpisodeState::Running), None));
+        assert_eq!(
+            list_query(Some("method=my%2Bnbv.v2&state=finished")).unwrap(),
+            (Some(EpisodeState::Finished), Some("my+nbv.v2".to_string()))
+        );
+        assert_eq!(list_query(Some("method=a+b")).unwrap().1.as_deref(), Some("a+b"));
+        let err = |q: &str| {
+            let e = list_query(Some(q)).unwrap_err();
+            assert_eq!(e.status(), StatusCode::UNPROCESSABLE_ENTITY, "{q}: {e}");
+            e.to_string()
+        };
+        assert_eq!(err("state=done"), "`state` must be `running` or `finished`, got \"done\"");
+        assert_eq!(err("state="), "`state` must be `running` or `finished`, got \"\"");
+        assert_eq!(err("state=running&state=finished"), "`state` is given more than once");
+        assert_eq!(err("stat=running"), "unknown query parameter `stat` (known: `state`, `method`)");
+        assert_eq!(err("method="), "`method` is empty");
+        assert!(err("method=%zz").starts_with("`method` is not a valid percent-encoded value"));
+        assert!(err("method=%ff").starts_with("`method` is not a valid"), "not UTF-8");
     }
 
     #[test]

@@ -246,10 +246,27 @@ impl Client {
         Ok((Obs::from_json(&v["observation"])?, ms))
     }
 
-    /// Ends the episode with `exception` / `planner_error`.
+    /// Ends the episode with `exception` / `planner_error`, `detail` as its terminal detail;
+    /// the last view's OBS (`done`, `terminal` set).
     pub fn abort(&self, id: &str, detail: &str) -> Result<Obs, ClientError> {
         let v = self.post_json(&format!("/v1/episodes/{id}/abort"), &json!({ "detail": detail }))?;
         Obs::from_json(&v["observation"])
+    }
+
+    /// `GET /v1/episodes[?state=STATE]`: this token's episodes (every episode on a server
+    /// without tokens) in creation order, `running` or `finished` ones only if `state` says so;
+    /// each `{"episode_id", "split", "object", "method", "state", "step", "created_at"}`.
+    /// Running ones left over from a crashed client can be ended with [`Client::abort`].
+    pub fn list_episodes(&self, state: Option<&str>) -> Result<Vec<Value>, ClientError> {
+        let path = match state {
+            None => "/v1/episodes".to_string(),
+            Some(s) => format!("/v1/episodes?state={}", query_escape(s)),
+        };
+        let v = self.get_json(&path)?;
+        v["episodes"]
+            .as_array()
+            .cloned()
+            .ok_or_else(|| protocol(format!("GET {path}: no `episodes` list: {v}")))
     }
 
     /// The depth of observation `step` (row-major, camera-frame z, 0 = no hit).
@@ -265,6 +282,19 @@ impl Client {
         let r = self.checked("GET", &format!("/v1/episodes/{id}/result"), None)?;
         String::from_utf8(r.body).map_err(|e| protocol(format!("result: {e}")))
     }
+}
+
+/// `s` percent-encoded for a query string (unreserved characters as they are).
+fn query_escape(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for b in s.bytes() {
+        if b.is_ascii_alphanumeric() || b"-._~".contains(&b) {
+            out.push(b as char);
+        } else {
+            out.push_str(&format!("%{b:02X}"));
+        }
+    }
+    out
 }
 
 /// One remote episode to play.

@@ -234,6 +234,12 @@ impl Registry {
         self.lock().len()
     }
 
+    /// Connections admitted so far (a client that keeps its connection alive adds one for all
+    /// its requests).
+    pub fn admitted(&self) -> u64 {
+        self.next_id.load(Ordering::SeqCst)
+    }
+
     /// Connections closed so far to make room for a new one.
     pub fn evicted(&self) -> u64 {
         self.evicted.load(Ordering::SeqCst)

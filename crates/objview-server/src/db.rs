@@ -3,7 +3,10 @@
 //! at any point restarts with its finished results intact and can replay the actions of the
 //! episodes that were running (the engine is deterministic).
 //!
-//! Tables: `episodes(id, owner, split, uid, method, request, state)`, `actions(episode, seq,
+//! Tables: `episodes(id, owner, split, uid, method, request, state, created_at)` (`created_at`:
+//! RFC 3339 UTC with milliseconds, set by the database on insert; a database from before the
+//! column existed gets it added, its episodes stamped with the time of that upgrade),
+//! `actions(episode, seq,
 //! step, action, planner_seconds)` (the raw action JSON as received), `results(seq, episode,
 //! owner, method, line)` (`seq` = finish order; `line` = the `objview run` JSON line).
 
@@ -42,6 +45,11 @@ pub struct EpisodeRow {
     pub request: String,
     /// `running` or `finished`.
     pub state: String,
+    /// When it was created (RFC 3339 UTC, `2025-01-31T12:00:00.123Z`); set by
+    /// [`Db::insert_episode`], ignored when inserting.
+    pub created_at: String,
+    /// Its creation order (the row id); set by [`Db::insert_episode`], ignored when inserting.
+    pub seq: i64,
 }
 
 /// An applied action as stored.
@@ -63,7 +71,8 @@ CREATE TABLE IF NOT EXISTS episodes (
     uid TEXT NOT NULL,
     method TEXT NOT NULL,
     request TEXT NOT NULL,
-    state TEXT NOT NULL
+    state TEXT NOT NULL,
+    created_at TEXT NOT NULL DEFAULT ''
 );
 CREATE TABLE IF NOT EXISTS actions (
     episode TEXT NOT NULL,
@@ -82,6 +91,23 @@ CREATE TABLE IF NOT EXISTS results (
 );
 CREATE INDEX IF NOT EXISTS results_owner_method ON results (owner, method);
 ";
+
+/// The current time as SQLite writes it: RFC 3339 UTC with milliseconds.
+const NOW: &str = "strftime('%Y-%m-%dT%H:%M:%fZ', 'now')";
+
+/// Adds `episodes.created_at` to a database written before it existed (its episodes get the
+/// time of this upgrade: their creation time was not recorded).
+fn add_created_at(conn: &Connection) -> rusqlite::Result<()> {
+    let has =
+        conn.prepare("SELECT 1 FROM pragma_table_info('episodes') WHERE name = 'created_at'")?.exists([])?;
+    if !has {
+        conn.execute_batch(&format!(
+            "ALTER TABLE episodes ADD COLUMN created_at TEXT NOT NULL DEFAULT '';
+             UPDATE episodes SET created_at = {NOW} WHERE created_at = '';"
+        ))?;
+    }
+    Ok(())
+}
 
 /// The server's database (one connection; writes are short transactions).
 pub struct Db {
@@ -106,6 +132,7 @@ impl Db {
         conn.pragma_update(None, "synchronous", "NORMAL").map_err(|e| open_err(path, e))?;
         conn.busy_timeout(std::time::Duration::from_secs(10)).map_err(|e| open_err(path, e))?;
         conn.execute_batch(SCHEMA).map_err(|e| open_err(path, e))?;
+        add_created_at(&conn).map_err(|e| open_err(path, e))?;
         Ok(Db { path: path.to_path_buf(), conn: Mutex::new(conn) })
     }
 
@@ -118,13 +145,17 @@ impl Db {
         self.conn.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// Stores a new (running) episode.
-    pub fn insert_episode(&self, e: &EpisodeRow) -> Result<(), DbError> {
-        self.conn().execute(
-            "INSERT INTO episodes (id, owner, split, uid, method, request, state) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+    /// Stores a new (running) episode, stamped with the current time; its creation order and
+    /// time (`seq`, `created_at`).
+    pub fn insert_episode(&self, e: &EpisodeRow) -> Result<(i64, String), DbError> {
+        Ok(self.conn().query_row(
+            &format!(
+                "INSERT INTO episodes (id, owner, split, uid, method, request, state, created_at) \
+                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, {NOW}) RETURNING rowid, created_at"
+            ),
             params![e.id, e.owner, e.split, e.uid, e.method, e.request, e.state],
-        )?;
-        Ok(())
+            |r| Ok((r.get(0)?, r.get(1)?)),
+        )?)
     }
 
     /// Stores an action before it is applied (`seq` counts actions from 1); a result is stored
@@ -151,7 +182,7 @@ impl Db {
     pub fn episodes(&self) -> Result<Vec<EpisodeRow>, DbError> {
         let conn = self.conn();
         let mut st = conn
-            .prepare("SELECT id, owner, split, uid, method, request, state FROM episodes ORDER BY rowid")?;
+            .prepare("SELECT id, owner, split, uid, method, request, state, created_at, rowid FROM episodes ORDER BY rowid")?;
         let rows = st.query_map([], |r| {
             Ok(EpisodeRow {
                 id: r.get(0)?,
@@ -161,6 +192,8 @@ impl Db {
                 method: r.get(4)?,
                 request: r.get(5)?,
                 state: r.get(6)?,
+                created_at: r.get(7)?,
+                seq: r.get(8)?,
             })
         })?;
         Ok(rows.collect::<Result<_, _>>()?)

@@ -8,7 +8,8 @@
 //! - [`db`] — persistence (SQLite, WAL) and `objview export`.
 //! - [`pool`] — split files and the cache of prepared scenes.
 //! - [`auth`] — bearer tokens and episode owners; [`error`] — errors and their statuses.
-//! - [`conn`] — the accept loop: connection cap, header / idle time limits.
+//! - [`conn`] — the accept loop: connection cap, header / idle time limits; [`compress`] — gzip
+//!   of responses for clients that accept it.
 //! - [`client`] — a blocking client, and the driver that runs a local [`objview_episode::Planner`]
 //!   against a server; [`remote`] — a batch of such episodes over split objects
 //!   (`objview run --server`), on the shared batch driver.
@@ -22,6 +23,7 @@
 pub mod api;
 pub mod auth;
 pub mod client;
+pub mod compress;
 pub mod conn;
 pub mod db;
 pub mod error;

@@ -1,5 +1,6 @@
 //! `GET /openapi.json`: the OpenAPI 3.0 description of every route, written by hand to agree
-//! with docs/server-api.md (a test checks that every route of the router is described).
+//! with docs/server-api.md (a test checks that every route of the router is described). gzip
+//! (docs/server-api.md, "Compression") is HTTP's own negotiation and is not described per route.
 
 use objview_episode::{ExecutionMode, Family, StopReason};
 use serde_json::{json, Value};
@@ -88,6 +89,12 @@ pub fn document() -> Value {
                     "seed": {"type": "integer", "minimum": 0, "default": 0},
                     "params": {"default": {}},
                     "record_timings": {"type": "boolean", "default": true}}},
+                "EpisodeSummary": {"type": "object", "required": ["episode_id", "split", "object", "method", "state", "step", "created_at"], "properties": {
+                    "episode_id": {"type": "string"}, "split": {"type": "string"},
+                    "object": {"type": "string", "description": "the object's uid, as the create answer's object_id"},
+                    "method": {"type": "string"}, "state": {"type": "string", "enum": ["running", "finished"]},
+                    "step": {"type": "integer", "minimum": 0, "description": "the current (running) or last (finished) observation's step"},
+                    "created_at": {"type": "string", "format": "date-time", "description": "RFC 3339 UTC, e.g. 2025-01-31T12:00:00.123Z"}}},
                 "Error": {"type": "object", "required": ["error"], "properties": {"error": {"type": "object",
                     "required": ["code", "message"], "properties": {"code": {"type": "string", "enum": [
                         "malformed_json", "invalid_request", "unauthorized", "not_found", "method_not_allowed",
@@ -112,7 +119,15 @@ pub fn document() -> Value {
             "/v1/candidate-sets/{name}": {"get": op("the poses of a candidate set (radius 3, look-at 0)",
                 vec![json!({"name": "name", "in": "path", "required": true, "schema": {"type": "string"}})], None,
                 ("200", ok("{name, poses}", any.clone())), &ep_errs)},
-            "/v1/episodes": {"post": op("create an episode (takes the start view)", vec![],
+            "/v1/episodes": {"get": op("this token's episodes (every episode without tokens) in creation order: to find running ones left behind by a client and abort them",
+                vec![json!({"name": "state", "in": "query", "required": false, "schema": {"type": "string", "enum": ["running", "finished"]},
+                            "description": "only episodes in this state (another value: 422 invalid_request naming `state`)"}),
+                     json!({"name": "method", "in": "query", "required": false, "schema": {"type": "string"},
+                            "description": "only episodes of this method (percent-encoded)"})], None,
+                ("200", ok("{episodes: [{episode_id, split, object, method, state, step, created_at}]}", json!({"type": "object",
+                    "required": ["episodes"], "properties": {"episodes": {"type": "array", "items": {"$ref": "#/components/schemas/EpisodeSummary"}}}}))),
+                &["401", "422"]),
+                "post": op("create an episode (takes the start view)", vec![],
                 Some(json_body(json!({"$ref": "#/components/schemas/CreateEpisode"}))),
                 ("201", ok("{episode_id, object_id, split, view_space, budget, seed, candidate_set, start_pose, intrinsics, action_timeout_s, observation}", any.clone())),
                 &["400", "401", "404", "408", "413", "422", "500"])},
@@ -136,13 +151,13 @@ pub fn document() -> Value {
                     "step": {"type": "integer", "minimum": 0}, "action": {"$ref": "#/components/schemas/Action"}}}))),
                 ("200", ok("{accepted: true, observation: OBS}; header Server-Timing: handler;dur=<ms>", any.clone())),
                 &["400", "401", "404", "408", "409", "413", "422"])},
-            "/v1/episodes/{id}/abort": {"post": op("the client's planner failed: end the episode with exception / planner_error", vec![id_param()],
+            "/v1/episodes/{id}/abort": {"post": op("end the episode now (the client's planner failed, or a client cleans up an episode it left running): exception / planner_error, terminal_detail = detail, views scored", vec![id_param()],
                 Some(json_body(json!({"type": "object", "properties": {"detail": {"type": "string"}}}))),
                 ("200", ok("{accepted: true, observation: OBS}", any.clone())), &["400", "401", "404", "408", "409", "413", "422"])},
             "/v1/episodes/{id}/result": {"get": op("the result line (objview run format) after the end", vec![id_param()], None,
                 ("200", ok("one objview run result object", any.clone())), &["401", "404", "409"])},
             "/v1/methods": {"get": op("methods with finished results", vec![], None, ("200", ok("{methods: [{method, finished}]}", any.clone())), &auth)},
-            "/v1/methods/{method}/results": {"get": op("finished results of a method, in finish order",
+            "/v1/methods/{method}/results": {"get": op("every finished result of a method, one line per finished episode in finish order (re-runs and aborted runs included: no deduplication; objview report applies its duplicate rule)",
                 vec![json!({"name": "method", "in": "path", "required": true, "schema": {"type": "string"}})], None,
                 ("200", json!({"description": "JSON Lines", "content": {"application/x-ndjson": {"schema": {"type": "string"}}}})), &ep_errs)},
         },

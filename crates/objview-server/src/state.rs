@@ -117,6 +117,10 @@ pub struct Slot {
     pub owner: String,
     /// What it was created with.
     pub spec: CreateSpec,
+    /// When it was created (RFC 3339 UTC, as stored).
+    pub created_at: String,
+    /// Its creation order (the database row id).
+    pub seq: i64,
     /// Actions received and not yet answered: while there are some, only they may end the
     /// episode at its time limit (each judged by when it arrived, not by when the engine got
     /// to it).
@@ -196,6 +200,33 @@ pub fn result_line(id: &str, res: &objview_episode::EpisodeResult) -> String {
         "error": format!("the result has a non-finite number at `{field}`; it is not recorded as a result"),
     })
     .to_string()
+}
+
+/// An episode's state as `GET /v1/episodes` shows and filters it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EpisodeState {
+    /// Waiting for an action.
+    Running,
+    /// Ended (its result is stored).
+    Finished,
+}
+
+impl EpisodeState {
+    /// Every state, in the order the docs name them.
+    pub const ALL: [EpisodeState; 2] = [EpisodeState::Running, EpisodeState::Finished];
+
+    /// `running` or `finished`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            EpisodeState::Running => "running",
+            EpisodeState::Finished => "finished",
+        }
+    }
+
+    /// Parses `running` / `finished`.
+    pub fn parse(s: &str) -> Option<EpisodeState> {
+        EpisodeState::ALL.into_iter().find(|x| x.as_str() == s)
+    }
 }
 
 /// The current view: its step, pose and (while running) the engine's depth.
@@ -346,6 +377,8 @@ impl AppState {
                 id: row.id.clone(),
                 owner: row.owner.clone(),
                 spec,
+                created_at: row.created_at.clone(),
+                seq: row.seq,
                 in_flight: AtomicUsize::new(0),
                 live: Mutex::new(live),
             };
@@ -427,8 +460,11 @@ impl AppState {
             method: spec.method.clone(),
             request: serde_json::to_string(&spec).map_err(|e| internal("storing the episode", e))?,
             state: "running".into(),
+            created_at: String::new(),
+            seq: 0,
         };
-        self.db.insert_episode(&row).map_err(|e| internal("storing the episode", e))?;
+        let (seq, created_at) =
+            self.db.insert_episode(&row).map_err(|e| internal("storing the episode", e))?;
         let budget = spec.budget;
         let start = ep.history()[0];
         let now = Instant::now();
@@ -451,6 +487,8 @@ impl AppState {
             id: id.clone(),
             owner: owner.to_string(),
             spec,
+            created_at,
+            seq,
             in_flight: AtomicUsize::new(0),
             live: Mutex::new(Live::Running(Box::new(running))),
         };
@@ -714,6 +752,50 @@ impl AppState {
             }
         }
         Ok(v)
+    }
+
+    /// `GET /v1/episodes`: the episodes `owner` may see (every episode without tokens), in
+    /// creation order, of one state and one method if asked: `{"episode_id", "split", "object",
+    /// "method", "state", "step", "created_at"}` each. An episode past its time limit is ended
+    /// first, as any request about it would. `object` is the uid the create answer named.
+    pub fn list(
+        &self,
+        owner: &str,
+        state: Option<EpisodeState>,
+        method: Option<&str>,
+    ) -> Result<Vec<Value>, ApiError> {
+        let mut slots: Vec<Arc<Slot>> = lock(&self.episodes)
+            .values()
+            .filter(|s| s.owner == owner && method.is_none_or(|m| s.spec.method == m))
+            .cloned()
+            .collect();
+        slots.sort_by_key(|s| s.seq);
+        let now = Instant::now();
+        let mut out = Vec::new();
+        for slot in slots {
+            let mut live = lock(&slot.live);
+            self.expire(&slot, &mut live, now)?;
+            let (here, step) = match &*live {
+                Live::Running(r) => (EpisodeState::Running, r.step()),
+                Live::Finished(_) if state == Some(EpisodeState::Running) => continue,
+                Live::Finished(_) => {
+                    (EpisodeState::Finished, self.finished_summary(&slot, &mut live)?.history.len() - 1)
+                }
+            };
+            if state.is_some_and(|s| s != here) {
+                continue;
+            }
+            out.push(json!({
+                "episode_id": slot.id,
+                "split": slot.spec.split,
+                "object": slot.spec.object,
+                "method": slot.spec.method,
+                "state": here.as_str(),
+                "step": step,
+                "created_at": slot.created_at,
+            }));
+        }
+        Ok(out)
     }
 
     /// `GET /v1/episodes/{id}/result`: the result line (409 while running).

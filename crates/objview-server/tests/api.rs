@@ -1,8 +1,8 @@
 //! The HTTP contract of docs/server-api.md against the real router on a free loopback port:
 //! catalog routes, create validation, every protocol-robustness case of an action (malformed
 //! JSON, wrong types, bad poses and reasons, infeasible poses, stale steps, actions after the
-//! end, concurrent actions, oversized bodies, unknown ids), time limits, tokens, and the
-//! hidden-means-hidden rule.
+//! end, concurrent actions, oversized bodies, unknown ids), time limits, tokens, the
+//! hidden-means-hidden rule, the episode list, gzip and keep-alive.
 
 mod common;
 
@@ -81,6 +81,7 @@ fn openapi_describes_every_route() {
         ("/v1/candidate-sets", "get"),
         ("/v1/candidate-sets/{name}", "get"),
         ("/v1/episodes", "post"),
+        ("/v1/episodes", "get"),
         ("/v1/episodes/{id}", "get"),
         ("/v1/episodes/{id}/observation", "get"),
         ("/v1/episodes/{id}/observation/depth.npy", "get"),
@@ -94,7 +95,13 @@ fn openapi_describes_every_route() {
     ] {
         assert!(paths.get(route).and_then(|p| p.get(method)).is_some(), "{method} {route} is not described");
     }
-    assert_eq!(paths.len(), 18, "a described route the test does not know");
+    assert_eq!(paths.len(), 18, "a described path the test does not know");
+    let ops: usize = paths.values().map(|p| p.as_object().unwrap().len()).sum();
+    assert_eq!(ops, 19, "a described route the test does not know");
+    let list = &paths["/v1/episodes"]["get"];
+    let names: Vec<&str> =
+        list["parameters"].as_array().unwrap().iter().map(|p| p["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["state", "method"]);
 }
 
 #[test]
@@ -577,6 +584,9 @@ fn hidden_means_hidden() {
         record("bad depth", get(&c, &ep_path(&id, "/observation/depth.npy?step=99")));
     }
     record("methods", get(&c, "/v1/methods"));
+    let listed = record("episode list", get(&c, "/v1/episodes?state=running")).json();
+    assert_eq!(listed["episodes"][0]["episode_id"], id.as_str(), "{listed}");
+    assert_eq!(listed["episodes"][0]["object"], "cube", "the uid the create answer named: {listed}");
     // The ending action's answer is still about the episode, not its metrics.
     record(
         "ending action",
@@ -611,4 +621,284 @@ fn hidden_means_hidden() {
     for k in ["sc", "nsc", "cd", "views", "path_cost"] {
         assert_eq!(step1[k], i["metrics"][k], "{k}");
     }
+}
+
+/// Whether `t` is RFC 3339 UTC as the server writes it: `YYYY-MM-DDTHH:MM:SS.mmmZ`.
+fn is_rfc3339_utc(t: &str) -> bool {
+    let b = t.as_bytes();
+    let digits = |r: std::ops::Range<usize>| r.clone().all(|i| b.get(i).is_some_and(u8::is_ascii_digit));
+    b.len() == 24
+        && digits(0..4)
+        && b[4] == b'-'
+        && digits(5..7)
+        && b[7] == b'-'
+        && digits(8..10)
+        && b[10] == b'T'
+        && digits(11..13)
+        && b[13] == b':'
+        && digits(14..16)
+        && b[16] == b':'
+        && digits(17..19)
+        && b[19] == b'.'
+        && digits(20..23)
+        && b[23] == b'Z'
+}
+
+/// The episode ids of a `GET /v1/episodes…` answer, asserting 200.
+fn listed(c: &objview_server::client::Client, path: &str) -> Vec<String> {
+    let r = get(c, path);
+    assert_eq!(r.status, 200, "{path}: {}", String::from_utf8_lossy(&r.body));
+    r.json()["episodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["episode_id"].as_str().unwrap().to_string())
+        .collect()
+}
+
+#[test]
+fn episodes_are_listed_by_state_and_method_for_their_own_token_only() {
+    let (mut cfg, tmp) = config();
+    let tokens = tmp.path().join("tokens.txt");
+    std::fs::write(&tokens, "tok-alice alice\ntok-bob bob\n").unwrap();
+    cfg.tokens = Some(tokens);
+    let s = start(&cfg);
+    let alice = objview_server::client::Client::new(&s.url(), Some("tok-alice"));
+    let bob = objview_server::client::Client::new(&s.url(), Some("tok-bob"));
+    let anon = client(&s);
+    let before = std::time::SystemTime::now();
+    let e1 = id_of(&create(&alice, &create_body("cube", "whole", json!("auto"))));
+    let mut other = create_body("octahedron", "whole", json!("auto"));
+    other["method"] = json!("other+nbv");
+    let e2 = id_of(&create(&alice, &other));
+    let e3 = id_of(&create(&bob, &create_body("cube", "whole", json!("auto"))));
+    // e1 ends (a stop at step 0); e2 moves once and is left running (an orphan).
+    let stop = action(0, json!({"type": "stop", "reason": "plan_end"}));
+    assert_eq!(post(&alice, &ep_path(&e1, "/actions"), &stop).status, 200);
+    assert_eq!(
+        post(&alice, &ep_path(&e2, "/actions"), &action(0, mv(pose_dir([1.0, 0.0, 0.0])))).status,
+        200
+    );
+
+    let all = get(&alice, "/v1/episodes").json();
+    let list = all["episodes"].as_array().unwrap();
+    assert_eq!(list.len(), 2, "bob's episode is not alice's: {all}");
+    let (a, b) = (&list[0], &list[1]);
+    assert_eq!(
+        (a["episode_id"].as_str(), a["split"].as_str(), a["object"].as_str(), a["method"].as_str()),
+        (Some(e1.as_str()), Some("hidden"), Some("cube"), Some("test-nbv"))
+    );
+    assert_eq!((a["state"].as_str(), a["step"].as_u64()), (Some("finished"), Some(0)));
+    assert_eq!(
+        (b["episode_id"].as_str(), b["object"].as_str(), b["method"].as_str()),
+        (Some(e2.as_str()), Some("octahedron"), Some("other+nbv"))
+    );
+    assert_eq!((b["state"].as_str(), b["step"].as_u64()), (Some("running"), Some(1)));
+    let mut keys: Vec<&str> = a.as_object().unwrap().keys().map(String::as_str).collect();
+    keys.sort_unstable();
+    assert_eq!(keys, ["created_at", "episode_id", "method", "object", "split", "state", "step"]);
+    let (t1, t2) = (a["created_at"].as_str().unwrap(), b["created_at"].as_str().unwrap());
+    assert!(is_rfc3339_utc(t1) && is_rfc3339_utc(t2), "{t1} {t2}");
+    assert!(t1 <= t2, "creation order: {t1} {t2}");
+    // The year and day are today's (UTC), derived from the system clock independently.
+    let days = before.duration_since(std::time::UNIX_EPOCH).unwrap().as_secs() / 86_400;
+    let year_now = 1970 + days * 400 / 146_097;
+    let year: u64 = t1[..4].parse().unwrap();
+    assert!((year_now - 1..=year_now + 1).contains(&year), "{t1} (about {year_now})");
+
+    assert_eq!(listed(&alice, "/v1/episodes?state=running"), [e2.as_str()]);
+    assert_eq!(listed(&alice, "/v1/episodes?state=finished"), [e1.as_str()]);
+    assert_eq!(listed(&alice, "/v1/episodes?method=other%2Bnbv"), [e2.as_str()]);
+    assert_eq!(listed(&alice, "/v1/episodes?method=other%2Bnbv&state=finished"), Vec::<String>::new());
+    assert_eq!(listed(&alice, "/v1/episodes?method=nobody"), Vec::<String>::new());
+    assert_eq!(listed(&bob, "/v1/episodes"), [e3.as_str()]);
+    assert_error(&get(&anon, "/v1/episodes"), 401, "unauthorized");
+    let r = get(&alice, "/v1/episodes?state=done");
+    assert_error(&r, 422, "invalid_request");
+    assert!(r.json()["error"]["message"].as_str().unwrap().starts_with("`state` must be"), "{}", r.json());
+    assert_error(&get(&alice, "/v1/episodes?stat=running"), 422, "invalid_request");
+
+    // The Rust client: list the orphans, abort them; the result says why.
+    let orphans = alice.list_episodes(Some("running")).unwrap();
+    assert_eq!(orphans.len(), 1);
+    assert_eq!(orphans[0]["episode_id"], e2.as_str());
+    assert_eq!(alice.list_episodes(None).unwrap().len(), 2);
+    let obs = alice.abort(&e2, "cleanup: the client crashed").unwrap();
+    assert!(obs.done);
+    assert!(alice.list_episodes(Some("running")).unwrap().is_empty());
+    let res = get(&alice, &ep_path(&e2, "/result")).json();
+    assert_eq!(
+        (res["terminal_source"].as_str(), res["terminal_reason"].as_str(), res["terminal_detail"].as_str()),
+        (Some("exception"), Some("planner_error"), Some("cleanup: the client crashed"))
+    );
+    assert_eq!(res["visited_poses"].as_array().unwrap().len(), 2, "the views taken are scored");
+    let e = alice.list_episodes(Some("all")).unwrap_err();
+    assert_eq!(e.code(), Some("invalid_request"), "{e}");
+    assert_eq!(listed(&bob, "/v1/episodes?state=running"), [e3]);
+}
+
+/// One HTTP/1.1 exchange on an open connection: status, headers (lower-case names) and the
+/// `Content-Length` body as sent (not decoded).
+fn exchange(s: &mut std::net::TcpStream, request: &str) -> (u16, Vec<(String, String)>, Vec<u8>) {
+    use std::io::{Read, Write};
+    s.write_all(request.as_bytes()).unwrap();
+    let mut head = Vec::new();
+    let mut byte = [0u8; 1];
+    while !head.ends_with(b"\r\n\r\n") {
+        assert_eq!(s.read(&mut byte).unwrap(), 1, "the connection closed mid-head");
+        head.push(byte[0]);
+    }
+    let head = String::from_utf8(head).unwrap();
+    let mut lines = head.split("\r\n");
+    let status = lines.next().unwrap().split_whitespace().nth(1).unwrap().parse().unwrap();
+    let headers: Vec<(String, String)> = lines
+        .filter_map(|l| l.split_once(':'))
+        .map(|(k, v)| (k.trim().to_ascii_lowercase(), v.trim().to_string()))
+        .collect();
+    let len: usize =
+        headers.iter().find(|(k, _)| k == "content-length").map(|(_, v)| v.parse().unwrap()).unwrap();
+    let mut body = vec![0u8; len];
+    s.read_exact(&mut body).unwrap();
+    (status, headers, body)
+}
+
+fn header<'a>(h: &'a [(String, String)], name: &str) -> Option<&'a str> {
+    h.iter().find(|(k, _)| k == name).map(|(_, v)| v.as_str())
+}
+
+fn gunzip(b: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    std::io::Read::read_to_end(&mut flate2::read::GzDecoder::new(b), &mut out).unwrap();
+    out
+}
+
+#[test]
+fn depth_is_gzipped_for_clients_that_accept_it_and_connections_stay_alive() {
+    let (cfg, _tmp) = config();
+    let s = start(&cfg);
+    let c = client(&s);
+    let id = id_of(&create(&c, &create_body("cube", "whole", json!("auto"))));
+    let depth_path = ep_path(&id, "/observation/depth.npy");
+    let req = |extra: &str| format!("GET {depth_path} HTTP/1.1\r\nHost: objview\r\n{extra}\r\n");
+    // Three requests on one connection: gzip, plain, gzip with a q-value.
+    let admitted = s.state.connections.admitted();
+    let mut sock = std::net::TcpStream::connect(s.addr).unwrap();
+    sock.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+    let (st, gz_h, gz) = exchange(&mut sock, &req("Accept-Encoding: gzip, deflate\r\n"));
+    assert_eq!(st, 200);
+    let (st, plain_h, plain) = exchange(&mut sock, &req(""));
+    assert_eq!(st, 200);
+    let (_, q_h, q) = exchange(&mut sock, &req("Accept-Encoding: br;q=1, gzip;q=0.5\r\n"));
+    let (_, refused_h, refused) = exchange(&mut sock, &req("Accept-Encoding: gzip;q=0\r\n"));
+    assert_eq!(s.state.connections.admitted() - admitted, 1, "four requests, one connection");
+    assert_eq!(header(&gz_h, "content-encoding"), Some("gzip"));
+    assert_eq!(header(&gz_h, "vary").map(str::to_ascii_lowercase).as_deref(), Some("accept-encoding"));
+    assert_eq!(header(&gz_h, "x-objview-step"), Some("0"));
+    assert_eq!(header(&plain_h, "content-encoding"), None, "no compression without the header");
+    assert_eq!(header(&plain_h, "vary").map(str::to_ascii_lowercase).as_deref(), Some("accept-encoding"));
+    assert_eq!(header(&q_h, "content-encoding"), Some("gzip"));
+    assert_eq!(header(&refused_h, "content-encoding"), None);
+    assert_eq!(refused, plain);
+    // The plain body is the NPY of 512 × 512 floats; the gzip one decodes to it byte for byte.
+    assert_eq!(plain.len(), objview_geom::npy::npy_header("<f4", &[512, 512]).len() + 512 * 512 * 4);
+    assert_eq!(gunzip(&gz), plain);
+    assert_eq!(gunzip(&q), plain);
+    assert!(gz.len() < plain.len() / 2, "gzip {} vs plain {}", gz.len(), plain.len());
+    eprintln!("depth.npy of the cube (start view): {} bytes plain, {} gzip (level 1)", plain.len(), gz.len());
+    // JSON routes too, when large enough; small ones and images go out as they are.
+    let (_, h, body) = exchange(
+        &mut sock,
+        "GET /v1/candidate-sets/tammes-360 HTTP/1.1\r\nHost: o\r\nAccept-Encoding: gzip\r\n\r\n",
+    );
+    assert_eq!(header(&h, "content-encoding"), Some("gzip"));
+    assert_eq!(
+        serde_json::from_slice::<Value>(&gunzip(&body)).unwrap()["poses"].as_array().unwrap().len(),
+        360
+    );
+    let (_, h, body) =
+        exchange(&mut sock, "GET /v1/health HTTP/1.1\r\nHost: o\r\nAccept-Encoding: gzip\r\n\r\n");
+    assert_eq!(
+        (header(&h, "content-encoding"), serde_json::from_slice::<Value>(&body).unwrap()["status"].as_str()),
+        (None, Some("ok"))
+    );
+    let png = ep_path(&id, "/observation/rgb.png");
+    let (_, h, body) =
+        exchange(&mut sock, &format!("GET {png} HTTP/1.1\r\nHost: o\r\nAccept-Encoding: gzip\r\n\r\n"));
+    assert_eq!((header(&h, "content-encoding"), &body[1..4]), (None, &b"PNG"[..]));
+    assert_eq!(s.state.connections.admitted() - admitted, 1, "still one connection");
+
+    // The Rust client asks for gzip, decodes it, and keeps its connection alive.
+    let rc = client(&s);
+    let admitted = s.state.connections.admitted();
+    let r = rc.raw("GET", &depth_path, None).unwrap();
+    assert_eq!(r.body, plain, "decoded byte for byte");
+    let values = rc.depth(&id, 0).unwrap();
+    let mut npy = objview_geom::npy::npy_header("<f4", &[512, 512]);
+    values.iter().for_each(|v| npy.extend_from_slice(&v.to_le_bytes()));
+    assert_eq!(npy, plain);
+    for _ in 0..5 {
+        assert_eq!(rc.health().unwrap()["status"], "ok");
+        assert_eq!(rc.depth(&id, 0).unwrap(), values);
+    }
+    assert_eq!(s.state.connections.admitted() - admitted, 1, "the Rust client reuses its connection");
+}
+
+#[test]
+fn the_rust_client_sends_accept_encoding_gzip_and_decodes_the_answer() {
+    use std::io::{Read, Write};
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap();
+    let body = json!({"status": "ok", "padding": "x".repeat(4000)}).to_string();
+    let packed = objview_server::compress::gzip_bytes(body.as_bytes()).unwrap();
+    let server = std::thread::spawn(move || {
+        let (mut s, _) = listener.accept().unwrap();
+        let mut head = Vec::new();
+        let mut byte = [0u8; 1];
+        while !head.ends_with(b"\r\n\r\n") {
+            s.read_exact(&mut byte).unwrap();
+            head.push(byte[0]);
+        }
+        let answer = format!(
+            "HTTP/1.1 200 OK\r\nContent-Type: application/json\r\nContent-Encoding: gzip\r\nContent-Length: {}\r\n\r\n",
+            packed.len()
+        );
+        s.write_all(answer.as_bytes()).unwrap();
+        s.write_all(&packed).unwrap();
+        String::from_utf8(head).unwrap().to_ascii_lowercase()
+    });
+    let c = objview_server::client::Client::new(&format!("http://{addr}"), None);
+    let v = c.health().unwrap();
+    assert_eq!(v["padding"].as_str().map(str::len), Some(4000));
+    let head = server.join().unwrap();
+    let accept =
+        head.lines().find_map(|l| l.strip_prefix("accept-encoding:")).unwrap_or_else(|| panic!("{head}"));
+    assert!(accept.split(',').any(|c| c.trim() == "gzip"), "{head}");
+}
+
+#[test]
+fn depth_sizes_of_a_built_in_mug_plain_and_gzip() {
+    use objview_geom::synth::{self, Detail};
+    let mesh = synth::build("mug", Detail::DEFAULT).unwrap();
+    let (mesh, _) = objview_geom::normalize::normalize(
+        mesh,
+        objview_geom::normalize::Normalization::Unit,
+        std::path::Path::new("mug.obj"),
+    )
+    .unwrap();
+    let pose = objview_views::start_pose(objview_geom::pose::VIEW_RADIUS);
+    let cam = objview_render::Camera::new(pose, objview_render::Intrinsics::default());
+    let depth = objview_render::render(&mesh, &cam).depth;
+    let hits = depth.iter().filter(|d| **d > 0.0).count();
+    assert!(hits > 1000, "the mug is in view: {hits} pixels");
+    let plain = objview_server::api::depth_npy(&depth);
+    let t = Instant::now();
+    let gz = objview_server::compress::gzip_bytes(&plain).unwrap();
+    let ms = t.elapsed().as_secs_f64() * 1e3;
+    assert_eq!(gunzip(&gz), plain);
+    assert!(gz.len() < plain.len(), "gzip {} vs plain {}", gz.len(), plain.len());
+    eprintln!(
+        "depth.npy of the mug (start view, {hits} object pixels): {} bytes plain, {} gzip (level 1, {ms:.1} ms)",
+        plain.len(),
+        gz.len()
+    );
 }

@@ -351,6 +351,8 @@ fn hostile_requests_get_their_errors_and_nothing_hidden_leaks() {
     );
     let big = format!("{{\"poses\": [{}]}}", vec!["[3,0,0,0,0,0,0]"; 70_000].join(","));
     check("oversized body", post_bytes(&good, &feas, big.as_bytes()), 413, "payload_too_large");
+    check("an unknown state filter", get(&good, "/v1/episodes?state=zombie"), 422, "invalid_request");
+    check("another token's list", get(&wrong, "/v1/episodes"), 401, "unauthorized");
     // Refused requests never touched the episode.
     let info = get(&good, &format!("/v1/episodes/{id}")).json();
     assert_eq!((info["state"].clone(), info["step"].clone()), (json!("running"), json!(0)));
@@ -365,6 +367,10 @@ fn hostile_requests_get_their_errors_and_nothing_hidden_leaks() {
     assert_eq!(t["reason"], "invalid_action", "{t}");
     assert!(t["detail"].as_str().unwrap().contains("camera centre is 1.732e300 object units"), "{t}");
     answers.push(("huge move".into(), r));
+    let r = get(&good, "/v1/episodes");
+    assert_eq!(r.status, 200);
+    assert_eq!(r.json()["episodes"][0]["object"], "cube", "the uid the client sent");
+    answers.push(("episode list".into(), r));
     for (what, r) in &answers {
         let text = String::from_utf8_lossy(&r.body);
         assert!(!text.contains(&path_str(&fixture().dir)), "{what} names the pool's folder: {text}");

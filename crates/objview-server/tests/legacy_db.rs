@@ -117,6 +117,15 @@ fn a_database_from_before_is_replayed_served_and_exported_as_the_old_binary_did(
             .expect("an exported line of the method");
         assert_same_result(&line, want, &format!("episode {id}"));
     }
+    // The episodes predate `created_at`: they are listed, stamped with the upgrade's time.
+    let list = get(&c, "/v1/episodes").json();
+    let list = list["episodes"].as_array().unwrap();
+    assert_eq!(list.len(), 3);
+    for e in list {
+        assert_eq!(e["state"], "finished", "{e}");
+        let t = e["created_at"].as_str().unwrap();
+        assert!(t.len() == 24 && t.ends_with('Z') && &t[10..11] == "T", "{t}");
+    }
     s.stop();
     let got = objview_server::db::export(&db, None).unwrap();
     assert_eq!(got.len(), export.len());

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import warnings
 
 import gymnasium
@@ -37,7 +38,7 @@ def test_spaces_and_a_full_episode(server):
     assert obs in env.observation_space
     assert obs["depth"].shape == (512, 512) and obs["depth"].dtype == np.float32
     assert obs["pose"].shape == (7,) and obs["mask"].shape == (128,)
-    assert info == {"step": 0, "object_id": "cube"}
+    assert info["step"] == 0 and info["object_id"] == "cube"
     # The mask is the view space's feasibility of the candidates (hemi: z ≥ 0).
     z = env.candidates[:, 2]
     clear = np.abs(z) > 1e-6
@@ -54,11 +55,12 @@ def test_spaces_and_a_full_episode(server):
         assert reward == 0.0 and truncated is False
         assert obs in env.observation_space
         if not terminated:
-            assert info["step"] == steps and "result" not in info
+            assert info["step"] == steps and "result_json" not in info and "terminal" not in info
             np.testing.assert_array_equal(obs["pose"], env.candidates[action])
     assert steps == 4
     assert info["terminal"]["reason"] == "plan_end"
-    res = info["result"]
+    res = json.loads(info["result_json"])
+    assert res == env.result
     assert res["uid"] == "cube" and res["method"] == "t-gym" and res["family"] == "learned"
     assert res["view_space"] == "hemi" and len(res["visited_poses"]) == 4
     assert res["checkpoints"]["terminal"]["views"] == 4
@@ -70,7 +72,9 @@ def test_continuous_pose_actions_objects_and_reward_hook(server):
 
     def reward_fn(env, obs, info):
         calls.append(info["step"])
-        return float(info["result"]["checkpoints"]["terminal"]["sc"]["0.02"]) if "result" in info else 0.0
+        if "result_json" not in info:
+            return 0.0
+        return float(json.loads(info["result_json"])["checkpoints"]["terminal"]["sc"]["0.02"])
 
     env = make(server, method="t-gym", reward_fn=reward_fn, objects=["cone", 0])
     _, info = env.reset(seed=1)
@@ -99,5 +103,5 @@ def test_gymnasium_make(server):
     obs, info = env.reset(seed=0)
     assert obs["depth"].shape == (512, 512)
     obs, r, term, trunc, info = env.step(env.unwrapped.stop_action)
-    assert term and info["result"]["terminal_reason"] == "plan_end"
+    assert term and json.loads(info["result_json"])["terminal_reason"] == "plan_end"
     env.close()

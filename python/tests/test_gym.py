@@ -105,3 +105,91 @@ def test_gymnasium_make(server):
     obs, r, term, trunc, info = env.step(env.unwrapped.stop_action)
     assert term and json.loads(info["result_json"])["terminal_reason"] == "plan_end"
     env.close()
+
+
+def test_info_action_mask_intrinsics_candidates(server):
+    env = make(server, method="t-gym", view_space="hemi")
+    obs, info = env.reset(seed=0)
+    am = info["action_mask"]
+    assert am.dtype == np.int8 and am.shape == (env.action_space.n,)
+    assert am[env.stop_action] == 1  # the last action (index N) is the stop
+    np.testing.assert_array_equal(am[:-1], obs["mask"])
+    assert 0 < am[:-1].sum() < 128
+    for _ in range(50):
+        a = env.action_space.sample(mask=info["action_mask"])
+        assert am[a] == 1
+    assert info["intrinsics"] == env.episode.intrinsics and info["intrinsics"]["width"] == 512
+    np.testing.assert_array_equal(info["candidates"], env.candidates)
+    _, _, _, _, info = env.step(int(np.flatnonzero(am[:-1])[0]))
+    np.testing.assert_array_equal(info["action_mask"], am)
+    env.close()
+
+
+def test_max_moves_stops_with_plan_end(server):
+    env = make(server, method="t-gym-max", max_moves=2)
+    obs, info = env.reset(seed=0)
+    ok = np.flatnonzero(obs["mask"])
+    _, _, term, _, info = env.step(int(ok[0]))
+    assert not term
+    _, _, term, _, info = env.step(int(ok[1]))
+    assert term and info["terminal"]["reason"] == "plan_end"
+    res = json.loads(info["result_json"])
+    assert len(res["visited_poses"]) == 3 and res["terminal_source"] == "algorithm_stop"
+    with pytest.raises(ValueError):
+        make(server, max_moves=0)
+    env.close()
+
+
+def test_budget_alone_does_not_stop_after_k_moves(server):
+    env = make(server, method="t-gym-budget")
+    obs, _ = env.reset(seed=0)
+    ok = np.flatnonzero(obs["mask"])
+    for i in range(6):  # budget=5 and an iterative run: the sixth move is accepted
+        _, _, term, _, info = env.step(int(ok[i]))
+        if term:
+            break
+    assert info["step"] == 6 and not term
+    env.close()
+
+
+def test_import_objview_registers_the_env():
+    import subprocess
+    import sys
+
+    code = ("import sys, gymnasium, objview; "
+            "assert 'objview/ObjView-v0' in gymnasium.registry; "
+            "assert 'objview.gym' not in sys.modules")
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
+
+
+def test_vector_env_shards_and_seeds(server):
+    from gymnasium.vector import SyncVectorEnv
+
+    n = 2
+    venv = SyncVectorEnv([
+        (lambda i=i: make(server, method="t-gym-vec", shard=(i, n), max_moves=1))
+        for i in range(n)
+    ])
+    obs, infos = venv.reset(seed=3)
+    assert list(infos["object_id"]) == ["cube", "cone"]  # not both object 0
+    assert [e.base_seed for e in venv.envs] == [3, 3]  # seed s - i: the same benchmark seed
+    assert obs["depth"].shape == (n, 512, 512)
+    ids = [e.episode.id for e in venv.envs]
+    masks = infos["action_mask"]
+    actions = np.array([int(np.flatnonzero(m[:-1])[0]) for m in masks])
+    obs, rew, term, trunc, infos = venv.step(actions)
+    assert term.tolist() == [True, True]
+    results = [json.loads(s) for s in infos["result_json"]]  # a flat string per env
+    assert [r["uid"] for r in results] == ["cube", "cone"]
+    assert [r["seed"] for r in results] == [3, 3]
+    assert list(infos["terminal"]["reason"]) == ["plan_end", "plan_end"]
+    # The next reset continues each shard's cycle.
+    obs, rew, term, trunc, infos = venv.step(actions)  # autoreset step
+    assert list(infos["object_id"]) == ["cube", "cone"]
+    running = [e.episode.id for e in venv.envs]
+    venv.close()
+    client = server.client()
+    for ep_id in ids + running:
+        assert client.episode_status(ep_id)["state"] == "finished"
+    with pytest.raises(ValueError):
+        make(server, shard=(2, 2))

@@ -114,7 +114,8 @@ def test_gym_reset_and_close_abort_the_running_episode(server):
     env.close()  # twice is fine
 
 
-def test_list_episodes_and_abort_orphans(server):
+def test_list_episodes_and_abort_orphans(issue17_server):
+    server = issue17_server
     client = server.client()
     other = server.client(token=OTHER_TOKEN)
     a = client.create_episode("tiny", 0, budget=5, method="t-orphan-a")
@@ -144,7 +145,8 @@ def test_list_episodes_and_abort_orphans(server):
     other.abort_orphans()
 
 
-def test_check_env_leaves_no_running_episode(server):
+def test_check_env_leaves_no_running_episode(issue17_server):
+    server = issue17_server
     client = server.client()
     client.abort_orphans(method="t-gym-check-clean")
     env = ObjViewEnv(client, "tiny", budget=5, candidate_set="tammes-128",

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
+import objview
 from conftest import TOKEN
 from objview.gym import ObjViewEnv
 
@@ -20,14 +21,33 @@ def make(server, **kw):
     return ObjViewEnv(server.url, "tiny", token=TOKEN, **kw)
 
 
-def test_check_env_passes(server):
-    env = make(server, method="t-gym-check")
+class RecordingClient(objview.Client):
+    """Keeps the ids of the episodes it creates."""
+
+    def __init__(self, *a, **kw):
+        super().__init__(*a, **kw)
+        self.created = []
+
+    def create_episode(self, *a, **kw):
+        ep = super().create_episode(*a, **kw)
+        self.created.append(ep.id)
+        return ep
+
+
+def test_check_env_passes_and_leaves_no_running_episode(server):
+    client = RecordingClient(server.url, token=TOKEN)
+    env = ObjViewEnv(client, "tiny", budget=5, candidate_set="tammes-128", method="t-gym-check")
     with warnings.catch_warnings():
         # Expected warnings only: the unbounded Boxes (depth ≥ 0, pose) and the missing spec
         # of an environment built without gymnasium.make (no alternative render modes).
         warnings.simplefilter("ignore", UserWarning)
         check_env(env)
+    assert len(client.created) >= 3  # check_env resets many times…
+    states = {i: client.episode_status(i)["state"] for i in client.created}
+    # …and every episode but the environment's current one has been ended (aborted at reset).
+    assert [i for i, st in states.items() if st == "running"] == [env.episode.id]
     env.close()
+    assert all(client.episode_status(i)["state"] == "finished" for i in client.created)
 
 
 def test_spaces_and_a_full_episode(server):

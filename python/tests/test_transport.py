@@ -106,7 +106,8 @@ def test_reconnects_after_the_server_closed_an_idle_connection(objview_bin, pool
         assert ep.step == 1
 
 
-def test_the_real_server_gzips_and_keeps_the_connection(server):
+def test_the_real_server_gzips_and_keeps_the_connection(issue17_server):
+    server = issue17_server
     c = server.client()
     r = c.request("GET", "/v1/candidate-sets/tammes-360")
     if r.header("Content-Encoding") is None:

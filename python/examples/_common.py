@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from typing import Any, List, Optional
 
@@ -13,8 +14,16 @@ from objview.planner import summary_line
 
 def parse_args(description: str, default_method: str, argv: Optional[List[str]] = None):
     p = argparse.ArgumentParser(description=description)
-    p.add_argument("--url", default="http://127.0.0.1:8080", help="server URL")
-    p.add_argument("--token", default=None, help="bearer token (servers started with --tokens)")
+    p.add_argument(
+        "--url",
+        default=os.environ.get("OBJVIEW_URL") or "http://127.0.0.1:8080",
+        help="server URL (default: $OBJVIEW_URL, else http://127.0.0.1:8080)",
+    )
+    p.add_argument(
+        "--token",
+        default=os.environ.get("OBJVIEW_TOKEN") or None,
+        help="bearer token of a server started with --tokens (default: $OBJVIEW_TOKEN)",
+    )
     p.add_argument(
         "--split",
         default=None,

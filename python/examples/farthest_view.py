@@ -8,7 +8,7 @@ budget K it stops with `plan_end` after K moves; with `auto` it runs until the s
 episode, or stops with `candidate_exhausted` when no candidate is left.  It never reads a depth
 image: a geometric coverage baseline.
 
-    python examples/farthest_view.py --url http://127.0.0.1:8080 --split main_hidden_test --budget 5
+    python examples/farthest_view.py --url http://127.0.0.1:8080 --token TOKEN --split main_hidden_test --budget 5
 """
 
 from __future__ import annotations

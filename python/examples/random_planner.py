@@ -8,7 +8,7 @@ themselves differ from the Rust `random` planner's ChaCha8).  With a fixed budge
 `plan_end` after K moves; with `auto` it runs until the server ends the episode (MS@0.02,
 `enough_info` or the cap), or stops with `candidate_exhausted` when no candidate is left.
 
-    python examples/random_planner.py --url http://127.0.0.1:8080 --split main_hidden_test --budget 5
+    python examples/random_planner.py --url http://127.0.0.1:8080 --token TOKEN --split main_hidden_test --budget 5
 """
 
 from __future__ import annotations

@@ -11,6 +11,7 @@ from __future__ import annotations
 import io
 import struct
 import zlib
+from typing import List, Optional
 
 import numpy as np
 
@@ -35,7 +36,9 @@ def decode_png_builtin(data: bytes) -> np.ndarray:
     if data[:8] != _SIGNATURE:
         raise ValueError("not a PNG file")
     pos = 8
-    idat = []
+    idat: List[bytes] = []
+    width: Optional[int]
+    height: Optional[int]
     width = height = depth = ctype = interlace = None
     while pos + 8 <= len(data):
         (length,) = struct.unpack(">I", data[pos : pos + 4])
@@ -48,7 +51,7 @@ def decode_png_builtin(data: bytes) -> np.ndarray:
             idat.append(chunk)
         elif kind == b"IEND":
             break
-    if width is None:
+    if width is None or height is None:
         raise ValueError("PNG without IHDR")
     if depth != 8 or ctype not in _CHANNELS or interlace != 0:
         raise ValueError(

@@ -108,7 +108,7 @@ for _cls in (
     PayloadTooLarge,
     InvalidRequest,
 ):
-    _BY_CODE[_cls.CODE] = _cls  # type: ignore[index]
+    _BY_CODE[str(_cls.CODE)] = _cls
     if _cls.STATUS is not None:
         _BY_STATUS[_cls.STATUS] = _cls
 

@@ -82,3 +82,25 @@ def test_auto_budget_runs_until_the_server_stops(client):
     # checkpoint exists, or the cap); the auto budget is read at MS@0.02.
     assert r["terminal_source"] == "benchmark", r["terminal_reason"]
     assert "MS@0.02" in r["checkpoints"]
+
+
+def test_auto_summary_line_shows_the_ms_checkpoint(server, tmp_path):
+    stdout, res = run_script(server, "farthest_view.py", tmp_path, "--budget", "auto",
+                             "--objects", "cube", "--method", "t-farthest-auto-line")
+    (r,) = res
+    line = next(x for x in stdout.splitlines() if x.startswith("cube:"))
+    ms = r["checkpoints"]["MS@0.02"]
+    assert f"auto (MS@0.02): {ms['views']} views" in line, line
+    assert f"NSC@0.02 {ms['nsc']['0.02']:.3f}" in line.split("auto (MS@0.02)")[1]
+
+
+def test_examples_take_the_token_from_the_environment(server, tmp_path):
+    out = tmp_path / "r.jsonl"
+    p = subprocess.run(
+        [sys.executable, str(EXAMPLES / "random_planner.py"), "--split", "tiny", "--budget", "1",
+         "--objects", "0", "--method", "t-env-token", "--out", str(out)],
+        capture_output=True, text=True, timeout=300,
+        env={**os.environ, "OBJVIEW_URL": server.url, "OBJVIEW_TOKEN": TOKEN},
+    )
+    assert p.returncode == 0, p.stderr
+    assert json.loads(out.read_text())["method"] == "t-env-token"

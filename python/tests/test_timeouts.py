@@ -45,3 +45,19 @@ def test_a_late_first_action_finds_the_episode_finished(fast_server):
     # Attaching to a finished episode by id.
     again = client.episode(ep.id)
     assert again.done and again.terminal["reason"] == "timeout" and again.step == 0
+
+
+def test_gym_step_after_the_server_ended_the_episode_terminates(fast_server):
+    import json
+
+    from objview.gym import ObjViewEnv
+
+    env = ObjViewEnv(fast_server.client(), "tiny", budget=5, candidate_set="tammes-128",
+                     method="t-timeout-gym")
+    obs, info = env.reset(seed=0)
+    time.sleep(2.5)  # the server ends the episode (start timeout 1 s)
+    obs, reward, terminated, truncated, info = env.step(0)
+    assert terminated and not truncated
+    assert info["terminal"]["source"] == "exception" and info["terminal"]["reason"] == "timeout"
+    assert json.loads(info["result_json"])["terminal_reason"] == "timeout"
+    env.close()

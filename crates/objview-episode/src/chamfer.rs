@@ -29,6 +29,12 @@ use rayon::prelude::*;
 /// [`Targets::update`]).
 const FRESH_RUN: usize = 256;
 
+/// The next f64 above a finite `d ≥ 0` (`f64::next_up`, which needs Rust 1.86).
+fn above(d: f64) -> f64 {
+    debug_assert!(d >= 0.0 && d.is_finite());
+    f64::from_bits(d.to_bits() + 1)
+}
+
 /// The immutable spatial index of a target set, shared (behind an `Arc`) by every episode
 /// on the same scene: building it sorts every point, which is most of an episode's set-up.
 #[derive(Debug)]
@@ -259,7 +265,7 @@ impl Targets {
                         let bound = if hint == NONE {
                             this.cap2
                         } else {
-                            dist2(p, fused.pos[hint as usize]).next_up().min(this.cap2)
+                            above(dist2(p, fused.pos[hint as usize])).min(this.cap2)
                         };
                         let found = fused.nearest(p, bound);
                         if found.1 != NONE {

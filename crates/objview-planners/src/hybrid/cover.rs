@@ -191,11 +191,19 @@ pub fn max_coverage(covers: &[Vec<u64>], needed: &[u64], budget: usize, time_lim
     }
     let greedy = greedy_max_coverage(&cols, &weights, budget);
     let value = |chosen: &[usize]| covered_by(&views, chosen, needed);
+    // Dominated columns (group set ⊆ another kept column's; equal sets keep the smaller index)
+    // are dropped: a solution using one can use its dominator instead, so the optimum stays.
+    let kept = undominated(&cols, weights.len());
+    let kept_cols: Vec<Vec<usize>> = kept.iter().map(|&c| cols[c].clone()).collect();
+    let kept_greedy: Vec<usize> = greedy.iter().filter_map(|c| kept.binary_search(c).ok()).collect();
     let waited = std::cell::Cell::new(0.0);
     let solved = {
         let _lock = highs_lock(&waited);
-        solve_max_coverage(&cols, &weights, budget, &greedy, time_limit_s)
+        solve_max_coverage(&kept_cols, &weights, budget, &kept_greedy, time_limit_s)
     };
+    let solved = solved.map(|(status, chosen, bound)| {
+        (status, chosen.map(|c| c.iter().map(|&i| kept[i]).collect::<Vec<usize>>()), bound)
+    });
     let seconds = t.elapsed().as_secs_f64() - waited.get();
     let mut sel = match solved {
         Ok((status, chosen, bound)) => {
@@ -225,6 +233,29 @@ pub fn max_coverage(covers: &[Vec<u64>], needed: &[u64], budget: usize, time_lim
     }
     sel.gap = sel.bound - sel.covered as f64;
     sel
+}
+
+/// Columns (ascending) not dominated by another: column a is dropped when some column b has a
+/// superset of its groups and (b's set is strictly larger, or the sets are equal and b < a).
+fn undominated(cols: &[Vec<usize>], groups: usize) -> Vec<usize> {
+    let words = groups.div_ceil(64);
+    let sets: Vec<Vec<u64>> = cols
+        .iter()
+        .map(|c| {
+            let mut b = vec![0u64; words];
+            for &g in c {
+                b[g >> 6] |= 1 << (g & 63);
+            }
+            b
+        })
+        .collect();
+    let subset = |a: &[u64], b: &[u64]| a.iter().zip(b).all(|(x, y)| x & !y == 0);
+    (0..cols.len())
+        .filter(|&a| {
+            !(0..cols.len())
+                .any(|b| b != a && subset(&sets[a], &sets[b]) && (cols[b].len() > cols[a].len() || b < a))
+        })
+        .collect()
 }
 
 /// The max-coverage ILP over grouped elements; (status, chosen columns if feasible, dual bound).

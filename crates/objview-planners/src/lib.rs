@@ -7,9 +7,14 @@
 //! - [`rse`]: rear-side entropy (Delmerico et al. 2018) and its movement-aware variant
 //!   RSE-Mov, on a probabilistic occupancy grid ([`occupancy`]).
 //!
+//! - [`hybrid`]: completion + NBV / set cover / max coverage (`completion-nbv`,
+//!   `completion-scp`, `completion-mcp`; family hybrid), with the `identity` and `oracle`
+//!   completion backends.
+//!
 //! [`registry`] knows them by name: one row per planner ([`registry::PlannerEntry`], next to
 //! the planner), collected in [`registry::TABLE`].
 
+pub mod hybrid;
 pub mod occupancy;
 pub mod oracle;
 pub mod random;

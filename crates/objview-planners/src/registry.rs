@@ -124,6 +124,8 @@ pub const TABLE: &[PlannerEntry] = &[
     crate::rse::RSE_MOV_ENTRY,
     crate::random::ENTRY,
     crate::oracle::ENTRY,
+    crate::hybrid::SCP_ENTRY,
+    crate::hybrid::MCP_ENTRY,
 ];
 
 const NAME_ARRAY: [&str; TABLE.len()] = {
@@ -270,7 +272,7 @@ mod tests {
     #[test]
     fn every_name_builds_and_params_apply() {
         for n in NAMES {
-            assert_eq!(by_name(n).unwrap().name(), *n);
+            assert!(by_name(n).unwrap().name().starts_with(*n));
         }
         assert!(by_name("nbv-net").err().unwrap().contains("unknown planner"));
         let p = with_params(
@@ -298,11 +300,11 @@ mod tests {
         let err = |name: &str, params: &[(String, Value)]| with_params(name, params).err().unwrap();
         assert_eq!(
             by_name("x").err().unwrap(),
-            "unknown planner \"x\" (known: random-tsp, rse, rse-mov, random, oracle)"
+            "unknown planner \"x\" (known: random-tsp, rse, rse-mov, random, oracle, completion-scp, completion-mcp)"
         );
         assert_eq!(
             err("x", &[("a".into(), json!(1))]),
-            "unknown planner \"x\" (known: random-tsp, rse, rse-mov, random, oracle)"
+            "unknown planner \"x\" (known: random-tsp, rse, rse-mov, random, oracle, completion-scp, completion-mcp)"
         );
         assert_eq!(err("random", &[("x".into(), json!(1))]), "planner random has no parameters");
         assert_eq!(err("rse", &[("gamma.x".into(), json!(1))]), "planner rse has no parameter \"gamma.x\"");
@@ -322,7 +324,13 @@ mod tests {
         assert_eq!(CLASSICAL, ["random-tsp", "rse", "rse-mov"]);
         for row in TABLE {
             let p = row.build_default().unwrap();
-            assert_eq!(p.name(), row.name);
+            // A hybrid planner's name shows its completion backend: `NAME[backend]`.
+            let name_ok = p.name() == row.name
+                || (row.family == Family::Hybrid
+                    && p.name()
+                        .strip_prefix(row.name)
+                        .is_some_and(|b| b.starts_with('[') && b.ends_with(']')));
+            assert!(name_ok, "{} vs row {}", p.name(), row.name);
             assert_eq!(p.family(), row.family, "{}", row.name);
             assert_eq!(p.execution_mode(), row.mode, "{}", row.name);
             assert!(!row.summary.is_empty() && !row.summary.contains('\n'), "{}", row.name);
@@ -413,11 +421,9 @@ mod tests {
             json!({"k": 7})
         );
         assert_eq!(registry.by_name("rse").unwrap().name(), "rse");
-        assert!(registry
-            .get("nope")
-            .err()
-            .unwrap()
-            .ends_with("(known: random-tsp, rse, rse-mov, random, oracle, echo)"));
+        assert!(registry.get("nope").err().unwrap().ends_with(
+            "(known: random-tsp, rse, rse-mov, random, oracle, completion-scp, completion-mcp, echo)"
+        ));
         // The built-in wrappers do not see other tables.
         assert!(by_name("echo").is_err());
 
@@ -445,6 +451,9 @@ mod tests {
         let at: Vec<usize> =
             lines.iter().zip(registry.entries()).map(|(l, r)| l.len() - r.summary.len()).collect();
         assert!(at.windows(2).all(|w| w[0] == w[1]), "{help}");
-        assert!(lines[0].starts_with("random-tsp  Classical  budgeted_plan  "), "{help}");
+        let first: Vec<&str> = lines[0].split_whitespace().take(3).collect();
+        assert_eq!(first, ["random-tsp", "Classical", "budgeted_plan"], "{help}");
+        // Columns are two spaces apart at the widest entry (`completion-scp`, `budgeted_plan`).
+        assert!(lines[0].starts_with("random-tsp      Classical  budgeted_plan  "), "{help}");
     }
 }

@@ -1,0 +1,69 @@
+//! Planning time of `completion-scp` and `completion-mcp` per plan (completion + steps + ILP +
+//! path) on the built-in mug at ~100k triangles, for the README ("Hybrid planners"):
+//! `cargo run --profile ci -p objview-planners --example hybrid_plan_time [-- TRIANGLES]`.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use objview_episode::{run_episode, scene_from_parts, Budget, EpisodeSettings};
+use objview_geom::cloud::sample_surface;
+use objview_geom::normalize::{normalize, Normalization};
+use objview_geom::synth::build_with_triangles;
+use objview_planners::hybrid::plan::{CompletionPlan, PlanKind};
+use objview_planners::hybrid::HybridSettings;
+use objview_views::{start_pose, ViewSet, ViewSpace};
+
+fn main() {
+    let tris: usize = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(100_000);
+    let mesh = build_with_triangles("mug", tris);
+    let n_tris = mesh.num_triangles();
+    let (mesh, _) = normalize(mesh, Normalization::Unit, Path::new("mug")).unwrap();
+    let gt = sample_surface(&mesh, 100_000, 1);
+    let vs = ViewSpace::builtin("whole").unwrap();
+    let settings = EpisodeSettings { record_timings: false, ..Default::default() };
+    let t = std::time::Instant::now();
+    let scene =
+        Arc::new(scene_from_parts("mug", mesh, gt, "sampled".into(), &vs, "whole", &settings, None).unwrap());
+    println!("mug: {n_tris} triangles, scene + reference {:.1} s", t.elapsed().as_secs_f64());
+    let cands = Arc::new(ViewSet::resolve("tammes-360").unwrap().poses(3.0));
+    for (kind, budget) in [(PlanKind::SetCover, Budget::Auto), (PlanKind::MaxCoverage, Budget::Fixed(10))] {
+        for completion in ["oracle", "identity"] {
+            let s = HybridSettings { completion: completion.into(), ..HybridSettings::default() };
+            let mut p = CompletionPlan::new(kind, s).unwrap();
+            let r = run_episode(
+                scene.clone(),
+                &mut p,
+                &settings,
+                budget,
+                0,
+                start_pose(3.0),
+                cands.clone(),
+                serde_json::json!({}),
+            )
+            .unwrap();
+            let info = p.last_plan().expect("a plan was made");
+            println!(
+                "{:<26} budget {:<4}: plan {:.3} s (completion {:.3}, steps+ILP {:.3}); {} completed pts, {} target / {} occluder voxels, \
+                 {} columns, ILP {} ({} chosen, bound {}, gap {}, {:.3} s), {} filled, {} views, NSC@0.02 {:.4}, {}",
+                r.method,
+                budget.to_string(),
+                info.plan_seconds,
+                info.completion_seconds,
+                info.steps_seconds,
+                info.completed_points,
+                info.target_voxels,
+                info.occluder_voxels,
+                info.columns,
+                info.selection.status,
+                info.selection.chosen.len(),
+                info.selection.bound,
+                info.selection.gap,
+                info.selection.seconds,
+                info.filled.len(),
+                r.visited_poses.len(),
+                r.checkpoints[&"terminal".parse().unwrap()].metrics.nsc["0.02"],
+                r.terminal_reason,
+            );
+        }
+    }
+}

@@ -1,0 +1,472 @@
+//! The exact view-selection steps of `completion-scp` and `completion-mcp` (reference:
+//! `shared/research/learned-baselines.md` §7 steps 6–7 and §8):
+//!
+//! - [`set_cover`]: the fewest candidates covering every needed voxel — the exact minimum set
+//!   cover of `objview-difficulty` ([`solve_min_cover`]: reductions, LP bound, combinatorial
+//!   search, HiGHS ILP), with the planners' time limit (10 s);
+//! - [`max_coverage`]: at most B candidates covering the most needed voxels — a HiGHS ILP
+//!   `max Σ w_g y_g  s.t.  Σ x_i ≤ B,  y_g ≤ Σ_{i covers g} x_i,  x binary,  y ∈ [0, 1]`, where
+//!   elements covered by exactly the same candidates are merged into one group g of weight w_g
+//!   (an exact reduction; y needs no integrality: for binary x the optimum has y_g =
+//!   min(1, Σ x_i)). Warm-started from the greedy selection;
+//! - [`farthest_fill`]: the budget fill, farthest-point sampling over candidate positions.
+//!
+//! Status semantics, as everywhere in the workspace: a solve is `optimal` only when proven; a
+//! run stopped by the time limit is `time_limit` with its incumbent (never worse than greedy)
+//! and a proven bound, and the planner records both (never calling it optimal).
+
+use std::collections::HashMap;
+use std::time::Instant;
+
+use highs::{ColProblem, HighsModelStatus, HighsSolutionStatus, Sense};
+use objview_difficulty::ilp::{highs_lock, solve_min_cover, CoverSettings, CoverStatus};
+use serde::{Deserialize, Serialize};
+
+use super::steps::bit;
+
+/// Default wall-clock limit of the planners' ILPs (the reference's 10 s).
+pub const DEFAULT_ILP_TIME_LIMIT_S: f64 = 10.0;
+
+/// What an exact selection step returned.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Selection {
+    /// Selected columns (indices into the `covers` given), ascending.
+    pub chosen: Vec<usize>,
+    /// Needed elements the selection covers.
+    pub covered: usize,
+    /// Needed elements.
+    pub needed: usize,
+    /// `optimal` (proven), `time_limit` (stopped: incumbent + bound), `skipped` (nothing to
+    /// solve), or `error: …` (the greedy selection is used).
+    pub status: String,
+    /// Proven bound on the optimum: a lower bound on the cover size (set cover) or an upper
+    /// bound on the covered count (max coverage). Equals the objective when optimal.
+    pub bound: f64,
+    /// |objective − bound| (0 when optimal).
+    pub gap: f64,
+    /// Seconds in the solve (without waits for the process-wide HiGHS lock).
+    pub seconds: f64,
+}
+
+/// The elements of `needed` (a bitset) that some column covers, intersected per column.
+fn masked(covers: &[Vec<u64>], needed: &[u64]) -> Vec<Vec<u64>> {
+    covers.iter().map(|c| c.iter().zip(needed).map(|(a, b)| a & b).collect()).collect()
+}
+
+fn count(set: &[u64]) -> usize {
+    set.iter().map(|w| w.count_ones() as usize).sum()
+}
+
+fn covered_by(covers: &[Vec<u64>], chosen: &[usize], needed: &[u64]) -> usize {
+    let mut u = vec![0u64; needed.len()];
+    for &c in chosen {
+        for (w, x) in u.iter_mut().zip(&covers[c]) {
+            *w |= x;
+        }
+    }
+    u.iter().zip(needed).map(|(a, b)| (a & b).count_ones() as usize).sum()
+}
+
+/// The minimum number of columns of `covers` (bitsets over elements) covering every element
+/// of `needed` that some column covers, exact within `time_limit_s`.
+pub fn set_cover(covers: &[Vec<u64>], needed: &[u64], time_limit_s: f64) -> Selection {
+    let t = Instant::now();
+    let views = masked(covers, needed);
+    let settings = CoverSettings { time_limit_s, ..CoverSettings::default() };
+    let reachable = {
+        let mut u = vec![0u64; needed.len()];
+        for v in &views {
+            for (w, x) in u.iter_mut().zip(v) {
+                *w |= x;
+            }
+        }
+        count(&u)
+    };
+    if reachable == 0 {
+        return Selection {
+            chosen: Vec::new(),
+            covered: 0,
+            needed: 0,
+            status: "skipped".into(),
+            bound: 0.0,
+            gap: 0.0,
+            seconds: t.elapsed().as_secs_f64(),
+        };
+    }
+    match solve_min_cover(&views, &settings) {
+        Ok(r) => {
+            let status = match &r.status {
+                CoverStatus::Optimal => "optimal".to_string(),
+                CoverStatus::TimeLimit => "time_limit".to_string(),
+                CoverStatus::Infeasible => "error: infeasible".to_string(),
+                CoverStatus::Error(m) => format!("error: {m}"),
+            };
+            Selection {
+                covered: covered_by(&views, &r.best_cover, needed),
+                needed: reachable,
+                chosen: r.best_cover.clone(),
+                status,
+                bound: r.lower_bound as f64,
+                gap: (r.best_size - r.lower_bound.min(r.best_size)) as f64,
+                seconds: r.seconds,
+            }
+        }
+        Err(e) => Selection {
+            chosen: Vec::new(),
+            covered: 0,
+            needed: reachable,
+            status: format!("error: {e}"),
+            bound: 0.0,
+            gap: f64::NAN,
+            seconds: t.elapsed().as_secs_f64(),
+        },
+    }
+}
+
+/// The deterministic greedy max coverage: `budget` times the column adding the most weight
+/// (ties → smaller index; stops when nothing more is gained).
+fn greedy_max_coverage(cols: &[Vec<usize>], weights: &[f64], budget: usize) -> Vec<usize> {
+    let mut covered = vec![false; weights.len()];
+    let mut chosen = Vec::new();
+    for _ in 0..budget {
+        let mut best: Option<(f64, usize)> = None;
+        for (i, col) in cols.iter().enumerate() {
+            if chosen.contains(&i) {
+                continue;
+            }
+            let g: f64 = col.iter().filter(|&&e| !covered[e]).map(|&e| weights[e]).sum();
+            if g > 0.0 && best.is_none_or(|(b, _)| g > b) {
+                best = Some((g, i));
+            }
+        }
+        let Some((_, i)) = best else { break };
+        for &e in &cols[i] {
+            covered[e] = true;
+        }
+        chosen.push(i);
+    }
+    chosen.sort_unstable();
+    chosen
+}
+
+/// At most `budget` columns of `covers` covering the most elements of `needed`, exact within
+/// `time_limit_s` (see the module docs for the model). Nothing needed or `budget` 0 →
+/// `skipped` with nothing chosen.
+pub fn max_coverage(covers: &[Vec<u64>], needed: &[u64], budget: usize, time_limit_s: f64) -> Selection {
+    let t = Instant::now();
+    let views = masked(covers, needed);
+    // Group the needed elements by the set of columns covering them.
+    let mut groups: HashMap<Vec<u32>, usize> = HashMap::new();
+    for e in 0..needed.len() * 64 {
+        if !bit(needed, e) {
+            continue;
+        }
+        let sig: Vec<u32> = (0..views.len()).filter(|&c| bit(&views[c], e)).map(|c| c as u32).collect();
+        if !sig.is_empty() {
+            *groups.entry(sig).or_default() += 1;
+        }
+    }
+    let mut groups: Vec<(Vec<u32>, usize)> = groups.into_iter().collect();
+    groups.sort_unstable();
+    let reachable: usize = groups.iter().map(|g| g.1).sum();
+    let weights: Vec<f64> = groups.iter().map(|g| g.1 as f64).collect();
+    let mut cols: Vec<Vec<usize>> = vec![Vec::new(); views.len()];
+    for (g, (sig, _)) in groups.iter().enumerate() {
+        for &c in sig {
+            cols[c as usize].push(g);
+        }
+    }
+    let budget = budget.min(views.len());
+    let skipped = |t: Instant| Selection {
+        chosen: Vec::new(),
+        covered: 0,
+        needed: reachable,
+        status: "skipped".into(),
+        bound: 0.0,
+        gap: 0.0,
+        seconds: t.elapsed().as_secs_f64(),
+    };
+    if reachable == 0 || budget == 0 {
+        return skipped(t);
+    }
+    let greedy = greedy_max_coverage(&cols, &weights, budget);
+    let value = |chosen: &[usize]| covered_by(&views, chosen, needed);
+    // Dominated columns (group set ⊆ another kept column's; equal sets keep the smaller index)
+    // are dropped: a solution using one can use its dominator instead, so the optimum stays.
+    let kept = undominated(&cols, weights.len());
+    let kept_cols: Vec<Vec<usize>> = kept.iter().map(|&c| cols[c].clone()).collect();
+    let kept_greedy: Vec<usize> = greedy.iter().filter_map(|c| kept.binary_search(c).ok()).collect();
+    let waited = std::cell::Cell::new(0.0);
+    let solved = {
+        let _lock = highs_lock(&waited);
+        solve_max_coverage(&kept_cols, &weights, budget, &kept_greedy, time_limit_s)
+    };
+    let solved = solved.map(|(status, chosen, bound)| {
+        (status, chosen.map(|c| c.iter().map(|&i| kept[i]).collect::<Vec<usize>>()), bound)
+    });
+    let seconds = t.elapsed().as_secs_f64() - waited.get();
+    let mut sel = match solved {
+        Ok((status, chosen, bound)) => {
+            let chosen = chosen.filter(|c| value(c) >= value(&greedy)).unwrap_or_else(|| greedy.clone());
+            let covered = value(&chosen);
+            let bound = bound.unwrap_or(reachable as f64).min(reachable as f64).max(covered as f64);
+            let status = match status {
+                HighsModelStatus::Optimal => "optimal".to_string(),
+                HighsModelStatus::ReachedTimeLimit => "time_limit".to_string(),
+                other => format!("error: HiGHS model status {other:?}"),
+            };
+            Selection { chosen, covered, needed: reachable, status, bound, gap: 0.0, seconds }
+        }
+        Err(message) => Selection {
+            covered: value(&greedy),
+            chosen: greedy.clone(),
+            needed: reachable,
+            status: format!("error: {message}"),
+            bound: reachable as f64,
+            gap: 0.0,
+            seconds,
+        },
+    };
+    if sel.status == "optimal" {
+        // HiGHS proved it (gap 0): the bound is the objective.
+        sel.bound = sel.covered as f64;
+    }
+    sel.gap = sel.bound - sel.covered as f64;
+    sel
+}
+
+/// Columns (ascending) not dominated by another: column a is dropped when some column b has a
+/// superset of its groups and (b's set is strictly larger, or the sets are equal and b < a).
+fn undominated(cols: &[Vec<usize>], groups: usize) -> Vec<usize> {
+    let words = groups.div_ceil(64);
+    let sets: Vec<Vec<u64>> = cols
+        .iter()
+        .map(|c| {
+            let mut b = vec![0u64; words];
+            for &g in c {
+                b[g >> 6] |= 1 << (g & 63);
+            }
+            b
+        })
+        .collect();
+    let subset = |a: &[u64], b: &[u64]| a.iter().zip(b).all(|(x, y)| x & !y == 0);
+    (0..cols.len())
+        .filter(|&a| {
+            !(0..cols.len())
+                .any(|b| b != a && subset(&sets[a], &sets[b]) && (cols[b].len() > cols[a].len() || b < a))
+        })
+        .collect()
+}
+
+/// The max-coverage ILP over grouped elements; (status, chosen columns if feasible, dual bound).
+type MaxCoverOutcome = (HighsModelStatus, Option<Vec<usize>>, Option<f64>);
+
+fn solve_max_coverage(
+    cols: &[Vec<usize>],
+    weights: &[f64],
+    budget: usize,
+    start: &[usize],
+    time_limit_s: f64,
+) -> Result<MaxCoverOutcome, String> {
+    let mut pb = ColProblem::new();
+    let budget_row = pb.add_row(..=budget as f64);
+    let group_rows: Vec<_> = weights.iter().map(|_| pb.add_row(..=0.0)).collect();
+    for col in cols {
+        let factors = std::iter::once((budget_row, 1.0)).chain(col.iter().map(|&g| (group_rows[g], -1.0)));
+        pb.add_integer_column(0.0, 0.0..=1.0, factors);
+    }
+    for (g, &w) in weights.iter().enumerate() {
+        pb.add_column(w, 0.0..=1.0, [(group_rows[g], 1.0)]);
+    }
+    let mut model =
+        pb.try_optimise(Sense::Maximise).map_err(|s| format!("HiGHS rejected the model: {s:?}"))?;
+    for (name, r) in [
+        ("output_flag", model.try_set_option("output_flag", false)),
+        ("log_to_console", model.try_set_option("log_to_console", false)),
+        ("threads", model.try_set_option("threads", 1)),
+        ("random_seed", model.try_set_option("random_seed", 0)),
+        ("time_limit", model.try_set_option("time_limit", time_limit_s)),
+        ("mip_rel_gap", model.try_set_option("mip_rel_gap", 0.0)),
+        ("mip_abs_gap", model.try_set_option("mip_abs_gap", 0.0)),
+    ] {
+        r.map_err(|e| format!("HiGHS option {name}: {e:?}"))?;
+    }
+    model.try_set_option("parallel", "off").map_err(|e| format!("HiGHS option parallel: {e:?}"))?;
+    // Warm start: the greedy selection and the groups it covers.
+    let mut x: Vec<f64> = (0..cols.len()).map(|i| if start.contains(&i) { 1.0 } else { 0.0 }).collect();
+    let mut y = vec![0.0; weights.len()];
+    for &i in start {
+        for &g in &cols[i] {
+            y[g] = 1.0;
+        }
+    }
+    x.extend(y);
+    let _ = model.try_set_solution(Some(&x), None, None, None);
+    let solved = model.try_solve().map_err(|s| format!("HiGHS run failed: {s:?}"))?;
+    let chosen = (solved.primal_solution_status() == HighsSolutionStatus::Feasible).then(|| {
+        solved.get_solution().columns()[..cols.len()]
+            .iter()
+            .enumerate()
+            .filter(|(_, &v)| v > 0.5)
+            .map(|(i, _)| i)
+            .collect::<Vec<usize>>()
+    });
+    // A chosen set over budget would be a solver inconsistency: drop it (greedy is used).
+    let chosen = chosen.filter(|c| c.len() <= budget);
+    let bound = solved.double_info_value(c"mip_dual_bound").ok().filter(|b| b.is_finite());
+    Ok((solved.status(), chosen, bound))
+}
+
+/// Farthest-point fill: `count` times, the eligible position (in the given order, first wins
+/// ties) maximizing the minimum squared Euclidean distance to the anchors so far; each pick
+/// becomes an anchor. Returns indices into `eligible`'s positions (`eligible[i]` is the
+/// position of candidate i), in pick order; fewer when the eligible run out.
+pub fn farthest_fill(eligible: &[(usize, [f64; 3])], anchors: &[[f64; 3]], count: usize) -> Vec<usize> {
+    let d2 =
+        |a: &[f64; 3], b: &[f64; 3]| (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2);
+    let mut nearest: Vec<f64> = eligible
+        .iter()
+        .map(|(_, p)| anchors.iter().map(|a| d2(p, a)).fold(f64::INFINITY, f64::min))
+        .collect();
+    let mut taken = vec![false; eligible.len()];
+    let mut out = Vec::new();
+    while out.len() < count {
+        let mut best: Option<(f64, usize)> = None;
+        for (j, &d) in nearest.iter().enumerate() {
+            if !taken[j] && best.is_none_or(|(b, _)| d > b) {
+                best = Some((d, j));
+            }
+        }
+        let Some((_, j)) = best else { break };
+        taken[j] = true;
+        out.push(eligible[j].0);
+        let p = eligible[j].1;
+        for (k, (_, q)) in eligible.iter().enumerate() {
+            nearest[k] = nearest[k].min(d2(q, &p));
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn random_instance(rng: &mut ChaCha8Rng, cols: usize, elements: usize, p: f64) -> Vec<Vec<u64>> {
+        (0..cols)
+            .map(|_| {
+                let mut b = vec![0u64; elements.div_ceil(64)];
+                for e in 0..elements {
+                    if rng.gen_bool(p) {
+                        b[e >> 6] |= 1 << (e & 63);
+                    }
+                }
+                b
+            })
+            .collect()
+    }
+
+    /// Every subset of the columns, as (subset, covered count of `needed`).
+    fn subsets(covers: &[Vec<u64>], needed: &[u64]) -> Vec<(Vec<usize>, usize)> {
+        (0u32..1 << covers.len())
+            .map(|m| {
+                let s: Vec<usize> = (0..covers.len()).filter(|i| m >> i & 1 == 1).collect();
+                let c = covered_by(covers, &s, needed);
+                (s, c)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn set_cover_matches_brute_force() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        for trial in 0..25 {
+            let (n, m) = (rng.gen_range(1..=10), rng.gen_range(1..=70));
+            let p = rng.gen_range(0.05..0.4);
+            let covers = random_instance(&mut rng, n, m, p);
+            let mut needed = random_instance(&mut rng, 1, m, 0.8).remove(0);
+            if trial == 0 {
+                needed.iter_mut().for_each(|w| *w = 0);
+            }
+            let all: Vec<usize> = (0..n).collect();
+            let reachable = covered_by(&covers, &all, &needed);
+            let sel = set_cover(&covers, &needed, 10.0);
+            if reachable == 0 {
+                assert_eq!((sel.status.as_str(), sel.chosen.len()), ("skipped", 0));
+                continue;
+            }
+            let best = subsets(&covers, &needed)
+                .into_iter()
+                .filter(|(_, c)| *c == reachable)
+                .map(|(s, _)| s.len())
+                .min()
+                .unwrap();
+            assert_eq!(sel.status, "optimal", "trial {trial}");
+            assert_eq!(sel.chosen.len(), best, "trial {trial}");
+            assert_eq!((sel.covered, sel.needed), (reachable, reachable), "trial {trial}");
+            assert_eq!((sel.bound, sel.gap), (best as f64, 0.0));
+        }
+    }
+
+    #[test]
+    fn max_coverage_matches_brute_force() {
+        let mut rng = ChaCha8Rng::seed_from_u64(12);
+        for trial in 0..30 {
+            let (n, m) = (rng.gen_range(1..=10), rng.gen_range(1..=80));
+            let p = rng.gen_range(0.05..0.4);
+            let covers = random_instance(&mut rng, n, m, p);
+            let needed = random_instance(&mut rng, 1, m, 0.7).remove(0);
+            let budget = rng.gen_range(0..=n + 1);
+            let sel = max_coverage(&covers, &needed, budget, 10.0);
+            let best = subsets(&covers, &needed)
+                .into_iter()
+                .filter(|(s, _)| s.len() <= budget)
+                .map(|(_, c)| c)
+                .max()
+                .unwrap();
+            assert!(sel.chosen.len() <= budget, "trial {trial}");
+            assert_eq!(sel.covered, best, "trial {trial}: {sel:?}");
+            if sel.status != "skipped" {
+                assert_eq!(sel.status, "optimal", "trial {trial}");
+                assert_eq!((sel.bound, sel.gap), (best as f64, 0.0), "trial {trial}");
+            } else {
+                assert_eq!(best, 0, "trial {trial}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_greedy_trap_is_solved_exactly() {
+        // Elements 0..6. Greedy takes column 0 (covers 4: {1,2,3,4}) then one of 2 → 5; the
+        // optimum with B = 2 is columns 1 + 2 covering all 6.
+        let col = |es: &[usize]| vec![es.iter().fold(0u64, |w, &e| w | 1 << e)];
+        let covers = vec![col(&[1, 2, 3, 4]), col(&[0, 1, 2]), col(&[3, 4, 5])];
+        let needed = col(&[0, 1, 2, 3, 4, 5]);
+        let sel = max_coverage(&covers, &needed, 2, 10.0);
+        assert_eq!((sel.chosen.clone(), sel.covered, sel.status.as_str()), (vec![1, 2], 6, "optimal"));
+        let sel = set_cover(&covers, &needed, 10.0);
+        assert_eq!(sel.chosen, vec![1, 2]);
+    }
+
+    #[test]
+    fn farthest_fill_order() {
+        // Points on a line; anchor at 0. Picks: 10 (farthest), then 5 (mid: min distance 5 to
+        // both), then between 2 (min 2) and 3 (min 2 to 5? |3−5|=2, |3−0|=3 → 2) and 7, 8:
+        // 2 → min(2, 3)=2; 3 → min(3, 2)=2; 7 → min(2, 3)=2; 8 → min(3, 2)=2: all tie at 2,
+        // so the first eligible in order wins (2).
+        let line: Vec<(usize, [f64; 3])> = [2.0, 3.0, 5.0, 7.0, 8.0, 10.0]
+            .iter()
+            .enumerate()
+            .map(|(i, &x)| (100 + i, [x, 0.0, 0.0]))
+            .collect();
+        assert_eq!(farthest_fill(&line, &[[0.0; 3]], 3), vec![105, 102, 100]);
+        // Asking for more than exist: all of them, once.
+        let all = farthest_fill(&line, &[[0.0; 3]], 10);
+        assert_eq!(all.len(), 6);
+        // Ties at the first pick: the first in order.
+        let sym = [(0, [1.0, 0.0, 0.0]), (1, [-1.0, 0.0, 0.0])];
+        assert_eq!(farthest_fill(&sym, &[[0.0; 3]], 1), vec![0]);
+    }
+}

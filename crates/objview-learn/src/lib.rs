@@ -13,6 +13,8 @@
 pub mod bench;
 pub mod dataset;
 pub mod input_grid;
+pub mod mascvp;
+pub mod mascvp_train;
 pub mod nbvnet;
 pub mod npz;
 pub mod planner;

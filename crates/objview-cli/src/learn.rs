@@ -29,6 +29,82 @@ pub enum Command {
     Eval(EvalArgs),
     /// Benchmarks: dataset generation per object, training throughput, inference per step.
     Bench(BenchArgs),
+    /// Experiments of the paper with learned planners.
+    #[command(subcommand)]
+    Experiment(ExperimentCommand),
+}
+
+#[derive(Subcommand)]
+pub enum ExperimentCommand {
+    /// The difficulty-aware training experiment (paper Figure 4): MA-SCVP trained on
+    /// Main-Raw-Train and on Main-Balanced-Train (same size, recipe and seed), VC at gamma 0.5
+    /// over the 128 start views of a held-out Main-Analysis-Test, per d_plan bucket; writes
+    /// splits/, data/, models/, vc.jsonl, summary.json and the figure (PNG + SVG). Resumable.
+    DifficultyAware(ExperimentArgs),
+}
+
+#[derive(Parser)]
+pub struct ExperimentArgs {
+    /// Results files of `objview annotate` of the pool (JSON Lines).
+    #[arg(required = true)]
+    pub annotations: Vec<PathBuf>,
+    /// Output folder (resumed when it holds an experiment of the same settings).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Objects in each training subset (Main-Raw-Train and Main-Balanced-Train).
+    #[arg(long, default_value_t = 16)]
+    pub size: usize,
+    /// Objects of Main-Analysis-Test (Main-Train-Public objects in neither subset).
+    #[arg(long, default_value_t = 16)]
+    pub analysis: usize,
+    /// Seed of the pool split and the analysis draw.
+    #[arg(long, default_value_t = objview_pool::split::DEFAULT_SPLIT_SEED)]
+    pub split_seed: u64,
+    /// Main-Hidden-Test fraction of the pool split (default 528/5523).
+    #[arg(long, default_value_t = objview_pool::split::DEFAULT_TEST_FRACTION)]
+    pub test_fraction: f64,
+    /// Decoding threshold of the VC metric (the reference's 0.5).
+    #[arg(long, default_value_t = 0.5)]
+    pub gamma: f64,
+    /// Training epochs of each model.
+    #[arg(long, default_value_t = 3)]
+    pub epochs: usize,
+    /// Seed of both trainings (initialization, dropout, case order).
+    #[arg(long, default_value_t = 42)]
+    pub seed: u64,
+    /// Network grid (the data is pooled to it).
+    #[arg(long, default_value_t = 32)]
+    pub grid: usize,
+    /// Grid of the training data and of the analysis inputs (a multiple of --grid).
+    #[arg(long, default_value_t = 64)]
+    pub data_grid: usize,
+    /// conv1 and the three blocks' widths (reference: 32,64,128,256; default quarter).
+    #[arg(long, value_delimiter = ',', default_value = "8,16,32,64")]
+    pub widths: Vec<usize>,
+    /// The head's hidden FC widths.
+    #[arg(long, value_delimiter = ',', default_value = "512,256,128,128")]
+    pub fc: Vec<usize>,
+    /// Decoding threshold of the validation F1 that selects each model's kept epoch.
+    #[arg(long, default_value_t = 0.3)]
+    pub train_gamma: f64,
+    /// Fraction of each subset's objects held out for validation (by a hash of the uid).
+    #[arg(long, default_value_t = 0.1)]
+    pub val_fraction: f64,
+    /// At most this many training cases per epoch.
+    #[arg(long)]
+    pub max_cases: Option<usize>,
+    /// The long-tail protocol's need_case_1 of the training data.
+    #[arg(long, default_value_t = objview_learn::sampling::NEED_CASE_1)]
+    pub need_case_1: usize,
+    /// Residual-cover time limit, seconds (training labels and the analysis' ground-truth totals).
+    #[arg(long, default_value_t = 10.0)]
+    pub time_limit: f64,
+    /// Seed of the case sampling.
+    #[arg(long, default_value_t = 0)]
+    pub data_seed: u64,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
 }
 
 #[derive(Parser)]
@@ -155,7 +231,75 @@ pub fn run(c: Command) -> Result<()> {
         Command::Train(a) => train(a),
         Command::Eval(a) => eval(a),
         Command::Bench(a) => bench(a),
+        Command::Experiment(ExperimentCommand::DifficultyAware(a)) => difficulty_aware(a),
     }
+}
+
+struct StageLog;
+impl objview_learn::experiment::ExperimentLog for StageLog {
+    fn stage(&self, line: &str) {
+        eprintln!("learn experiment: {line}");
+    }
+}
+
+fn difficulty_aware(a: ExperimentArgs) -> Result<()> {
+    let [conv1, b1, b2, b3] = a.widths[..] else {
+        bail!("--widths needs four numbers (conv1 and the three blocks), got {:?}", a.widths);
+    };
+    let shape = MascvpShape { grid: a.grid, conv1, blocks: [b1, b2, b3], fc: a.fc.clone(), dropout: 0.35 };
+    let mut dataset = DatasetSettings {
+        method: Method::MaScvp,
+        grid: a.data_grid,
+        need_case_1: a.need_case_1,
+        seed: a.data_seed,
+        ..Default::default()
+    };
+    dataset.annotate.cover.time_limit_s = a.time_limit;
+    let settings = objview_learn::experiment::ExperimentSettings {
+        size: a.size,
+        analysis: a.analysis,
+        split: objview_pool::split::SplitSettings {
+            seed: a.split_seed,
+            test_fraction: a.test_fraction,
+            train_size: None,
+        },
+        dataset,
+        train: ScvpTrainSettings {
+            shape,
+            epochs: a.epochs,
+            gamma: a.train_gamma,
+            seed: a.seed,
+            val_fraction: a.val_fraction,
+            max_cases: a.max_cases,
+            ..Default::default()
+        },
+        gamma: a.gamma,
+    };
+    let command = command_line();
+    let progress = BarProgress { bar: Mutex::new(None) };
+    let summary = pool(a.threads)?.install(|| {
+        objview_learn::experiment::run_experiment(
+            &a.annotations,
+            &a.out,
+            &settings,
+            a.threads,
+            &command,
+            &objview_learn::experiment::Reporters {
+                batch: &TermProgress::new(false),
+                train: &progress,
+                log: &StageLog,
+            },
+        )
+    })?;
+    let files = objview_report::figure4::write(&summary, &a.out)?;
+    print!("{}", objview_report::figure4::markdown(&summary));
+    println!(
+        "learn experiment difficulty-aware: {} and {} files in {}",
+        objview_learn::experiment::SUMMARY_FILE,
+        files.len(),
+        a.out.display()
+    );
+    Ok(())
 }
 
 /// The command line as recorded in manifests and sidecars: `objview` and the arguments (the

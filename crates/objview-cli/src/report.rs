@@ -9,8 +9,8 @@ use objview_report::{build_report, ReportSettings};
 
 #[derive(Parser)]
 pub struct Args {
-    /// Episode result files (JSON Lines).
-    #[arg(required = true)]
+    /// Episode result files (JSON Lines); may be left out with --difficulty-aware.
+    #[arg(required_unless_present = "difficulty_aware")]
     pub results: Vec<PathBuf>,
     /// Output folder.
     #[arg(long, default_value = "report")]
@@ -30,6 +30,10 @@ pub struct Args {
     /// Skip the figures.
     #[arg(long)]
     pub no_plots: bool,
+    /// The output folder of `objview learn experiment difficulty-aware`: adds Figure 4
+    /// (figure4_difficulty_aware.png/.svg) and its table (difficulty_aware.md).
+    #[arg(long)]
+    pub difficulty_aware: Option<PathBuf>,
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -40,7 +44,19 @@ pub fn run(a: Args) -> Result<()> {
         plots: !a.no_plots,
         ..Default::default()
     };
-    let files = report_with(&a.results, &a.annotations, &a.out, &settings, true)?;
+    let mut files = Vec::new();
+    if !a.results.is_empty() {
+        files = report_with(&a.results, &a.annotations, &a.out, &settings, true)?;
+    }
+    if let Some(dir) = &a.difficulty_aware {
+        let summary = objview_report::figure4::read_summary(dir)?;
+        print!("{}", objview_report::figure4::markdown(&summary));
+        let extra = objview_report::figure4::write(&summary, &a.out)?;
+        for f in &extra {
+            println!("  {}", f.display());
+        }
+        files.extend(extra);
+    }
     println!("report: {} files in {}", files.len(), a.out.display());
     Ok(())
 }

@@ -243,3 +243,136 @@ fn mascvp_dataset_train_and_run() {
     let reason = line["terminal_reason"].as_str().unwrap();
     assert!(["plan_end", "candidate_exhausted"].contains(&reason), "{reason}");
 }
+
+/// `learn experiment difficulty-aware` end to end on a small annotated pool (tiny network, one
+/// epoch): the splits (equal subset sizes, analysis objects in neither subset), per-object VC
+/// lines over 128 starts, the summary and Figure 4; a re-run resumes every stage; other
+/// settings in the same folder are refused naming the difference; `objview report
+/// --difficulty-aware` draws the figure from the folder.
+#[test]
+fn difficulty_aware_experiment_end_to_end() {
+    let dir = tempdir();
+    let pool = dir.path().join("pool");
+    objview_ok(&["objects", "synth", "--count", "10", "--seed", "4", "--out", s(&pool)]);
+    let ann = dir.path().join("ann.jsonl");
+    objview_ok(&["annotate", s(&pool), "--out", s(&ann), "--threads", "2"]);
+    let out = dir.path().join("exp");
+    let args = |extra: &[&'static str]| -> Vec<String> {
+        let mut v: Vec<String> = [
+            "learn",
+            "experiment",
+            "difficulty-aware",
+            s(&ann),
+            "--out",
+            s(&out),
+            "--size",
+            "3",
+            "--analysis",
+            "2",
+            "--epochs",
+            "1",
+            "--grid",
+            "16",
+            "--data-grid",
+            "16",
+            "--widths",
+            "2,2,2,4",
+            "--fc",
+            "16",
+            "--need-case-1",
+            "4",
+            "--time-limit",
+            "2",
+            "--val-fraction",
+            "0",
+            "--threads",
+            "2",
+        ]
+        .iter()
+        .map(|x| x.to_string())
+        .collect();
+        v.extend(extra.iter().map(|x| x.to_string()));
+        v
+    };
+    let run = |extra: &[&'static str]| {
+        let a = args(extra);
+        objview_ok(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let first = run(&[]);
+    assert!(first.contains("## Difficulty-aware training (Figure 4)"), "{first}");
+    let summary: Value = serde_json::from_slice(&common::read(&out.join("summary.json"))).unwrap();
+    assert_eq!(summary["subsets"]["raw"]["objects"], 3);
+    assert_eq!(summary["subsets"]["balanced"]["objects"], 3);
+    assert_eq!(summary["analysis_objects"], 2);
+    assert!(summary["settings"]["deviation"].as_str().unwrap().contains("16^3"));
+    let uids = |k: &str| -> Vec<String> {
+        summary["subsets"][k]["uids"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|u| u.as_str().unwrap().to_string())
+            .collect()
+    };
+    let train: std::collections::BTreeSet<String> = uids("raw").into_iter().chain(uids("balanced")).collect();
+    assert!(uids("analysis").iter().all(|u| !train.contains(u)), "analysis objects are held out");
+    let vc = std::fs::read_to_string(out.join("vc.jsonl")).unwrap();
+    assert_eq!(vc.lines().count(), 2);
+    for l in vc.lines() {
+        let v: Value = serde_json::from_str(l).unwrap();
+        assert!(uids("analysis").contains(&v["uid"].as_str().unwrap().to_string()));
+        for m in ["raw", "balanced"] {
+            let per: Vec<f64> =
+                v["models"][m]["vc"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+            assert_eq!(per.len(), 128, "one VC per start view");
+            assert!(per.iter().all(|x| (0.0..=1.0).contains(x)));
+            let mean = per.iter().sum::<f64>() / 128.0;
+            assert!((mean - v["models"][m]["vc_mean"].as_f64().unwrap()).abs() < 1e-12);
+            let gap = v["models"][m]["vc_gap"].as_f64().unwrap();
+            assert!((gap - (1.0 - mean)).abs() < 1e-12);
+        }
+        assert!(v["gt_total_mean"].as_f64().unwrap() >= 2.0, "start view + at least one cover view");
+    }
+    for f in [
+        "figure4_difficulty_aware.png",
+        "figure4_difficulty_aware.svg",
+        "difficulty_aware.md",
+        "models/raw.json",
+    ] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    let raw_side: Value = serde_json::from_slice(&common::read(&out.join("models/raw.json"))).unwrap();
+    let raw_subset: Vec<String> = raw_side["data"]["subset"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|u| u.as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(raw_subset, uids("raw"), "the raw model saw exactly Main-Raw-Train");
+
+    // Resumed: nothing is generated, trained or analysed again; the summary's numbers stay.
+    let before: Vec<Vec<u8>> = ["vc.jsonl", "data/objects.jsonl", "models/raw.safetensors"]
+        .iter()
+        .map(|f| common::read(&out.join(f)))
+        .collect();
+    let again = run(&[]);
+    assert!(again.contains("## Difficulty-aware training"), "{again}");
+    for (f, b) in ["vc.jsonl", "data/objects.jsonl", "models/raw.safetensors"].iter().zip(&before) {
+        assert_eq!(&common::read(&out.join(f)), b, "{f} is kept as it was");
+    }
+    let s2: Value = serde_json::from_slice(&common::read(&out.join("summary.json"))).unwrap();
+    assert_eq!(s2["buckets"], summary["buckets"]);
+    assert_eq!(s2["models"]["raw"]["weights_fnv1a64"], summary["models"]["raw"]["weights_fnv1a64"]);
+
+    let a = args(&["--gamma", "0.4"]);
+    let err = objview_err(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(err.contains("other settings") && err.contains("gamma"), "{err}");
+
+    let rep = dir.path().join("report");
+    let printed = objview_ok(&["report", "--difficulty-aware", s(&out), "--out", s(&rep)]);
+    assert!(printed.contains("| d_plan bucket |"), "{printed}");
+    assert!(rep.join("figure4_difficulty_aware.png").is_file() && rep.join("difficulty_aware.md").is_file());
+    assert_eq!(
+        common::read(&rep.join("difficulty_aware.md")),
+        common::read(&out.join("difficulty_aware.md"))
+    );
+}

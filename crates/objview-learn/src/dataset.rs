@@ -227,6 +227,33 @@ pub struct ObjectRecord {
     pub version: String,
 }
 
+/// The normalized mesh of `obj` and its surface voxels S_gt, read exactly as `annotate` reads
+/// them.
+pub fn load_object(
+    obj: &ObjectRef,
+    a: &AnnotateSettings,
+) -> Result<(objview_geom::mesh::Mesh, VoxelSet), LearnError> {
+    let path = obj.mesh.as_path();
+    let (mesh, transform) =
+        load_normalized(path, a.normalize).map_err(objview_dataset::DatasetError::from)?;
+    let (points, _) = ground_truth_points(obj, a, &mesh, transform)?;
+    let set = VoxelSet::from_points(&points, a.resolution)
+        .map_err(|source| objview_dataset::DatasetError::Voxel { path: path.to_path_buf(), source })?;
+    Ok((mesh, set))
+}
+
+/// The per-view visible voxel sets O(v) of SPEC §4 over `set` for `cameras` (the sets d_plan is
+/// computed from).
+pub fn view_coverage(
+    mesh: &objview_geom::mesh::Mesh,
+    set: &VoxelSet,
+    a: &AnnotateSettings,
+    cameras: &[Camera],
+) -> Coverage {
+    let vis = Visibility::with_max_range(set, mesh, a.visibility, a.max_range);
+    Coverage::new(vis.observe_all_bitsets(cameras))
+}
+
 /// Generates the cases of one object and writes `out_dir/cases/<uid>.npz`.
 pub fn generate_object(
     obj: &ObjectRef,
@@ -243,16 +270,9 @@ pub fn generate_object(
     };
     let mut t = Instant::now();
     let a = &settings.annotate;
-    let path = obj.mesh.as_path();
-    let (mesh, transform) =
-        load_normalized(path, a.normalize).map_err(objview_dataset::DatasetError::from)?;
-    let (points, _) = ground_truth_points(obj, a, &mesh, transform)?;
+    let (mesh, set) = load_object(obj, a)?;
     lap("load", &mut t);
-
-    let set = VoxelSet::from_points(&points, a.resolution)
-        .map_err(|source| objview_dataset::DatasetError::Voxel { path: path.to_path_buf(), source })?;
-    let vis = Visibility::with_max_range(&set, &mesh, a.visibility, a.max_range);
-    let coverage = Coverage::new(vis.observe_all_bitsets(cameras));
+    let coverage = view_coverage(&mesh, &set, a, cameras);
     lap("visibility", &mut t);
 
     let rollouts: Vec<_> = (0..cameras.len()).map(|s| coverage.rollout(s, None)).collect();

@@ -13,6 +13,7 @@
 
 pub mod bench;
 pub mod dataset;
+pub mod experiment;
 pub mod input_grid;
 pub mod mascvp;
 pub mod mascvp_planner;

@@ -24,6 +24,7 @@
 //! order is a ChaCha8 shuffle seeded with `(seed, epoch)`, and per-epoch checkpoints (weights,
 //! optimizer) let `--resume` continue exactly. Objects go to validation by a hash of their uid.
 
+use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -177,6 +178,16 @@ impl ScvpCases {
 /// Reads every usable case of the `ma-scvp` dataset in `dir` at grid size `grid`; also returns
 /// how many were skipped because their cover failed.
 pub fn load_scvp_cases(dir: &Path, grid: usize) -> Result<(ScvpCases, usize), LearnError> {
+    load_scvp_cases_of(dir, grid, None)
+}
+
+/// [`load_scvp_cases`] restricted to the objects in `only` (`None`: every object); an object of
+/// `only` that the dataset does not hold is an error naming it.
+pub fn load_scvp_cases_of(
+    dir: &Path,
+    grid: usize,
+    only: Option<&BTreeSet<String>>,
+) -> Result<(ScvpCases, usize), LearnError> {
     let m = read_manifest(dir)?;
     let mpath = dir.join("manifest.json");
     if m["method"] != "ma-scvp" {
@@ -193,10 +204,22 @@ pub fn load_scvp_cases(dir: &Path, grid: usize) -> Result<(ScvpCases, usize), Le
             mpath.display()
         )));
     }
-    let files: Vec<String> = m["files"]
+    let uid_of =
+        |f: &str| Path::new(f).file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
+    let mut files: Vec<String> = m["files"]
         .as_array()
         .map(|a| a.iter().filter_map(|f| f.as_str().map(String::from)).collect())
         .unwrap_or_default();
+    if let Some(only) = only {
+        files.retain(|f| only.contains(&uid_of(f)));
+        let held: BTreeSet<String> = files.iter().map(|f| uid_of(f)).collect();
+        if let Some(missing) = only.iter().find(|u| !held.contains(*u)) {
+            return Err(LearnError::Invalid(format!(
+                "{}: object '{missing}' has no cases in this dataset",
+                mpath.display()
+            )));
+        }
+    }
     let parts: Vec<Result<(ScvpCases, usize), LearnError>> = files
         .par_iter()
         .map(|f| {
@@ -230,7 +253,7 @@ pub fn load_scvp_cases(dir: &Path, grid: usize) -> Result<(ScvpCases, usize), Le
             }
             let (vals, vis, cov) = (g.f32s(), visited.ints(), cover.ints());
             let c = data_grid.pow(3);
-            let uid = Path::new(f).file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
+            let uid = uid_of(f);
             let mut out = ScvpCases { grid, ..ScvpCases::default() };
             let mut skipped = 0;
             for i in 0..n {
@@ -537,8 +560,21 @@ pub fn train_scvp(
     resume: bool,
     progress: &dyn ScvpProgress,
 ) -> Result<ScvpOutcome, LearnError> {
+    train_scvp_on(data, None, out, settings, resume, progress)
+}
+
+/// [`train_scvp`] on the cases of the objects in `only` (`None`: every object of the dataset);
+/// the subset is part of what a checkpoint must match to be resumed.
+pub fn train_scvp_on(
+    data: &Path,
+    only: Option<&BTreeSet<String>>,
+    out: &Path,
+    settings: &ScvpTrainSettings,
+    resume: bool,
+    progress: &dyn ScvpProgress,
+) -> Result<ScvpOutcome, LearnError> {
     settings.validate()?;
-    let (all, skipped) = load_scvp_cases(data, settings.shape.grid)?;
+    let (all, skipped) = load_scvp_cases_of(data, settings.shape.grid, only)?;
     if all.is_empty() {
         return Err(LearnError::Invalid(format!("{}: the dataset has no usable cases", data.display())));
     }
@@ -573,7 +609,11 @@ pub fn train_scvp(
                 m.remove("epochs");
             }
         }
-        if st["network"] != "ma-scvp" || same != want || st["data"] != json!(data.display().to_string()) {
+        if st["network"] != "ma-scvp"
+            || same != want
+            || st["data"] != json!(data.display().to_string())
+            || st["objects"] != json!(only)
+        {
             return Err(LearnError::Invalid(format!(
                 "{}: the checkpoint was made with other settings or data; remove the folder or drop --resume",
                 state_path.display()
@@ -636,7 +676,7 @@ pub fn train_scvp(
             .map_err(|e| LearnError::io(&bpk, format!("cannot save the checkpoint: {e:?}")))?;
         let o = ckpt.join(format!("epoch-{epoch}.optim"));
         optim.to_record().save(&o).map_err(|e| LearnError::io(&o, format!("{e:?}")))?;
-        let st = json!({"network": "ma-scvp", "settings": settings_json, "data": data.display().to_string(), "history": history});
+        let st = json!({"network": "ma-scvp", "settings": settings_json, "data": data.display().to_string(), "objects": only, "history": history});
         std::fs::write(&state_path, serde_json::to_string_pretty(&st).expect("json"))
             .map_err(|e| LearnError::io(&state_path, e))?;
     }
@@ -666,9 +706,23 @@ pub fn train_scvp_and_describe(
     command: &str,
     progress: &dyn ScvpProgress,
 ) -> Result<Value, LearnError> {
+    train_scvp_on_and_describe(data, None, out, settings, resume, command, progress)
+}
+
+/// [`train_scvp_and_describe`] on the objects in `only` (recorded in the sidecar's
+/// `data.subset`).
+pub fn train_scvp_on_and_describe(
+    data: &Path,
+    only: Option<&BTreeSet<String>>,
+    out: &Path,
+    settings: &ScvpTrainSettings,
+    resume: bool,
+    command: &str,
+    progress: &dyn ScvpProgress,
+) -> Result<Value, LearnError> {
     let t = Instant::now();
     let manifest = read_manifest(data)?;
-    let o = train_scvp(data, out, settings, resume, progress)?;
+    let o = train_scvp_on(data, only, out, settings, resume, progress)?;
     let best = &o.history[o.best_epoch - 1];
     let bytes = std::fs::read(out).map_err(|e| LearnError::io(out, e))?;
     let (k, base_train, base_val) = o.baseline;
@@ -682,6 +736,7 @@ pub fn train_scvp_and_describe(
             "method": manifest["method"],
             "objects": manifest["objects"],
             "cases": manifest["cases"],
+            "subset": only,
             "train_cases": o.cases.0,
             "val_cases": o.cases.1,
             "skipped_cases": o.skipped,

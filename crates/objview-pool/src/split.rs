@@ -48,6 +48,11 @@ const STREAM_HIDDEN_TEST: u64 = 0;
 const STREAM_RAW_TRAIN: u64 = 1;
 /// ChaCha8 stream of the Main-Balanced-Train draw.
 const STREAM_BALANCED_TRAIN: u64 = 2;
+/// ChaCha8 stream of the Main-Analysis-Test draw ([`analysis_test`]).
+const STREAM_ANALYSIS_TEST: u64 = 3;
+/// File name of Main-Analysis-Test (written by the difficulty-aware experiment, not by
+/// `objview pool split`).
+pub const ANALYSIS_TEST_FILE: &str = "main_analysis_test.json";
 /// Name of the report written beside the split files.
 pub const REPORT_FILE: &str = "split_report.json";
 
@@ -512,6 +517,47 @@ pub fn make_splits(set: &AnnotationSet, settings: &SplitSettings) -> Result<Spli
     })
 }
 
+/// Main-Analysis-Test, the held-out objects of the difficulty-aware training experiment: `size`
+/// objects of Main-Train-Public that are in neither Main-Raw-Train nor Main-Balanced-Train,
+/// drawn by the Main-Hidden-Test two-stage rule ([`hidden_test_allocation`]: one object from
+/// every non-empty d_plan bucket first, rarest first, then the rest in proportion to the bucket
+/// frequencies) with ChaCha8 stream 3 of `seed` (partial Fisher–Yates over the bucket's
+/// uid-sorted objects, buckets ascending), so every difficulty level the pool has is evaluated.
+/// Sorted by uid. Errors: fewer than `size` objects left.
+pub fn analysis_test(splits: &Splits, size: usize, seed: u64) -> Result<Vec<Annotation>, PoolError> {
+    let used: std::collections::BTreeSet<&str> =
+        splits.main_raw_train.iter().chain(&splits.main_balanced_train).map(|a| a.uid.as_str()).collect();
+    let mut by_bucket: Vec<Vec<&Annotation>> = Vec::new();
+    let mut left: Vec<&Annotation> =
+        splits.main_train_public.iter().filter(|a| !used.contains(a.uid.as_str())).collect();
+    left.sort_by(|a, b| a.uid.cmp(&b.uid));
+    for a in left {
+        let b = proven_d_plan(a).ok().and_then(bucket_of).expect("Main-Train-Public has proven d_plan");
+        if by_bucket.len() <= b {
+            by_bucket.resize_with(b + 1, Vec::new);
+        }
+        by_bucket[b].push(a);
+    }
+    let counts: Vec<usize> = by_bucket.iter().map(Vec::len).collect();
+    let available: usize = counts.iter().sum();
+    if size > available {
+        return Err(PoolError::InvalidSetting {
+            name: "analysis_size",
+            reason: format!(
+                "{size} exceeds the {available} Main-Train-Public objects in neither training subset"
+            ),
+        });
+    }
+    let alloc = hidden_test_allocation(&counts, size);
+    let mut r = rng(seed, STREAM_ANALYSIS_TEST);
+    let mut out: Vec<Annotation> = Vec::with_capacity(size);
+    for (objs, &k) in by_bucket.iter().zip(&alloc) {
+        out.extend(draw(&mut r, objs.len(), k).into_iter().map(|i| objs[i].clone()));
+    }
+    out.sort_by(|a, b| a.uid.cmp(&b.uid));
+    Ok(out)
+}
+
 /// Whether an annotation's `gt_cloud` names a file (rather than `sampled(…)`).
 pub fn gt_cloud_is_file(gt_cloud: &str) -> bool {
     !gt_cloud.is_empty() && !gt_cloud.starts_with("sampled(")
@@ -654,6 +700,41 @@ pub(crate) mod tests {
 
     fn uids(v: &[Annotation]) -> Vec<&str> {
         v.iter().map(|a| a.uid.as_str()).collect()
+    }
+
+    /// Main-Analysis-Test: disjoint from both training subsets, inside Main-Train-Public, one
+    /// object per bucket that has objects left before proportional filling, deterministic, and a
+    /// size beyond what is left is an error naming the setting.
+    #[test]
+    fn analysis_test_is_held_out_and_covers_every_bucket() {
+        let set = pool(&[40, 12, 3, 1]);
+        let settings = SplitSettings { seed: 5, test_fraction: 0.1, train_size: Some(10) };
+        let splits = make_splits(&set, &settings).unwrap();
+        let a = analysis_test(&splits, 8, 5).unwrap();
+        assert_eq!(a.len(), 8);
+        assert_eq!(a, analysis_test(&splits, 8, 5).unwrap(), "deterministic");
+        let public: std::collections::BTreeSet<&str> = uids(&splits.main_train_public).into_iter().collect();
+        let used: std::collections::BTreeSet<&str> =
+            uids(&splits.main_raw_train).into_iter().chain(uids(&splits.main_balanced_train)).collect();
+        let mut left_counts = vec![0usize; 4];
+        for x in &splits.main_train_public {
+            if !used.contains(x.uid.as_str()) {
+                left_counts[bucket_of(x.d_plan.unwrap()).unwrap()] += 1;
+            }
+        }
+        let mut got = vec![0usize; 4];
+        for x in &a {
+            assert!(public.contains(x.uid.as_str()) && !used.contains(x.uid.as_str()), "{}", x.uid);
+            got[bucket_of(x.d_plan.unwrap()).unwrap()] += 1;
+        }
+        assert_eq!(got, hidden_test_allocation(&left_counts, 8));
+        for b in 0..4 {
+            assert!(got[b] >= 1 || left_counts[b] == 0, "bucket {b}: {got:?} of {left_counts:?}");
+        }
+        let total: usize = left_counts.iter().sum();
+        let err = analysis_test(&splits, total + 1, 5).unwrap_err().to_string();
+        assert!(err.contains("analysis_size"), "{err}");
+        assert_eq!(analysis_test(&splits, total, 5).unwrap().len(), total);
     }
 
     #[test]

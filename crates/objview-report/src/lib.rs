@@ -11,13 +11,15 @@
 //! - [`tables`]: the data of Tables 2–5 and the terminal summary; [`render`]: their Markdown and
 //!   CSV; [`format`](mod@format): number formats, time bins, pipe tables;
 //! - [`plots`]: the figures (PNG + SVG via `objview_plot`, data in `figures.json`);
-//! - [`report`]: [`build_report`] and [`Report::write`].
+//! - [`report`]: [`build_report`] and [`Report::write`];
+//! - [`figure4`]: the paper's Figure 4 from `objview learn experiment difficulty-aware`.
 //!
 //! Output is deterministic: episodes are sorted before averaging, maps are ordered, numbers have
 //! fixed formats, and nothing records a clock; the same inputs give byte-identical files.
 
 pub mod aggregate;
 pub mod error;
+pub mod figure4;
 pub mod format;
 pub mod load;
 pub mod plots;

@@ -507,6 +507,13 @@ pub struct BenchArgs {
     /// Skip the dataset-generation measurement.
     #[arg(long)]
     pub skip_dataset: bool,
+    /// Which networks: `nbv-net`, `ma-scvp` or `all`.
+    #[arg(long, default_value = "all")]
+    pub network: String,
+    /// MA-SCVP: timed training batches (batch 2) of the reference shape (64³, 34 M parameters;
+    /// tens of seconds each on this machine); 0 skips it.
+    #[arg(long, default_value_t = 1)]
+    pub reference_batches: usize,
 }
 
 fn ms(s: &objview_runs::bench::Spread) -> String {
@@ -516,6 +523,18 @@ fn ms(s: &objview_runs::bench::Spread) -> String {
 fn bench(a: BenchArgs) -> Result<()> {
     use objview_learn::bench::*;
     println!("learn bench: {} at ~{} triangles", a.object, a.triangles);
+    let (nbv, scvp) = match a.network.as_str() {
+        "all" => (true, true),
+        "nbv-net" => (true, false),
+        "ma-scvp" => (false, true),
+        o => bail!("--network: unknown network '{o}' (expected nbv-net, ma-scvp or all)"),
+    };
+    if scvp {
+        bench_mascvp(&a)?;
+    }
+    if !nbv {
+        return Ok(());
+    }
     if !a.skip_dataset {
         let settings = DatasetSettings::default();
         let recs =
@@ -553,5 +572,41 @@ fn bench(a: BenchArgs) -> Result<()> {
             ms(&n)
         );
     }
+    Ok(())
+}
+
+fn bench_mascvp(a: &BenchArgs) -> Result<()> {
+    use objview_learn::bench::*;
+    let scaled = MascvpShape::scaled();
+    let mut line = String::from("ma-scvp training, scaled shape (32^3, 8/16/32/64), batch 8:");
+    let mut one = 0.0;
+    for threads in [1usize, 2] {
+        let s = pool(Some(threads))?.install(|| mascvp_training_throughput(&scaled, 8, a.batches));
+        if threads == 1 {
+            one = s.median;
+        }
+        line += &format!(" {threads} thread(s) median {:.2} samples/s (x{:.2});", s.median, s.median / one);
+    }
+    println!("{line}");
+    if a.reference_batches > 0 {
+        let s = pool(Some(2))?
+            .install(|| mascvp_training_throughput(&MascvpShape::reference(), 2, a.reference_batches));
+        println!(
+            "ma-scvp training, reference shape (64^3, 32/64/128/256), batch 2, 2 threads: median {:.3} samples/s ({:.1} s per sample)",
+            s.median,
+            1.0 / s.median
+        );
+    }
+    let ([g, n, p, t], size) =
+        pool(Some(1))?.install(|| mascvp_plan_step(&a.object, a.triangles, a.steps))?;
+    println!(
+        "ma-scvp one-shot planning step (shipped weights), 1 thread, {} starts: total {} = grid update (2 frames, 64^3) {} + network {} + decode and open path {} (mean plan {:.1} views)",
+        a.steps.clamp(1, 128),
+        ms(&t),
+        ms(&g),
+        ms(&n),
+        ms(&p),
+        size
+    );
     Ok(())
 }

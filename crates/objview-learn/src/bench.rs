@@ -1,6 +1,8 @@
 //! The benchmark procedures of `objview learn bench` (the CLI prints them): dataset generation
 //! per object, training throughput (samples/s at 32³ and 64³, on 1 and 2 threads) and the
-//! planner's cost per step (grid update + network) at 32³ and 64³.
+//! planner's cost per step (grid update + network) at 32³ and 64³; for MA-SCVP the training
+//! throughput of the scaled and the reference shape and the one-shot planning step (grid +
+//! network + decode + TSP).
 //!
 //! Objects are built-in procedural objects at a chosen triangle count, written to a temporary
 //! folder, so the figures are reproducible on any machine.
@@ -112,4 +114,90 @@ pub fn inference_per_step(
         c.push(t1 + t2);
     }
     Ok([Spread::of(a), Spread::of(b), Spread::of(c)])
+}
+
+/// MA-SCVP training samples per second of `shape` with batch `batch` over `batches` timed
+/// batches (after one warm-up batch), on random grids and labels; the spread is of per-batch
+/// samples/s.
+pub fn mascvp_training_throughput(
+    shape: &crate::mascvp::MascvpShape,
+    batch: usize,
+    batches: usize,
+) -> Spread {
+    let base = Device::flex();
+    base.seed(1);
+    let device = base.autodiff();
+    let mut net = crate::mascvp::MascvpNet::new(shape, &device);
+    let mut optim = AdamConfig::new().with_epsilon(1e-8).init();
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let g = shape.grid;
+    let mut rates = Vec::new();
+    for i in 0..=batches {
+        let x: Vec<f32> = (0..batch * g.pow(3)).map(|_| rng.gen_range(0.1..0.97)).collect();
+        let vs: Vec<f32> = (0..batch * 128).map(|_| (rng.gen_range(0..10) == 0) as u8 as f32).collect();
+        let y: Vec<f32> = (0..batch * 128).map(|_| (rng.gen_range(0..20) == 0) as u8 as f32).collect();
+        let t = Instant::now();
+        let x = Tensor::<5>::from_data(TensorData::new(x, [batch, 1, g, g, g]), &device);
+        let vs = Tensor::<2>::from_data(TensorData::new(vs, [batch, 128]), &device);
+        let y = Tensor::<2>::from_data(TensorData::new(y, [batch, 128]), &device);
+        let loss = crate::mascvp_train::weighted_bce_sum(net.forward(x, vs), y, 1.5);
+        let grads = GradientsParams::from_grads(loss.backward(), &net);
+        net = optim.step(1e-4, net, grads);
+        if i > 0 {
+            rates.push(batch as f64 / t.elapsed().as_secs_f64());
+        }
+    }
+    let _ = net.valid();
+    Spread::of(rates)
+}
+
+/// The MA-SCVP planner's one-shot network step, as `ma-scvp` runs it, from each of `starts`
+/// tammes-128 start views of built-in `name`: insert the start and the bootstrap view's frames
+/// into a fresh 64³ grid (`grid update`; the bootstrap is the farthest view), one network call
+/// with the shipped weights (`network`: pooling to 32³ + forward), decode at γ = 0.3 and order
+/// the decoded views on the exact open path (`plan`: decode + TSP, with the decoded set size).
+/// Returns the spreads of (grid update, network, plan, total) and the mean decoded set size.
+pub fn mascvp_plan_step(
+    name: &str,
+    triangles: usize,
+    starts: usize,
+) -> Result<([Spread; 4], f64), LearnError> {
+    use crate::mascvp_planner::{bootstrap_view, plan_views, MascvpScorer};
+    use objview_planners::tsp::TspSettings;
+    let mesh = objview_geom::synth::build_with_triangles(name, triangles);
+    let cameras: Vec<Camera> = GridViews::new(objview_geom::pose::VIEW_RADIUS)?.planning().to_vec();
+    let poses: Vec<objview_geom::Pose> = cameras.iter().map(|c| c.pose).collect();
+    let mut scorer = MascvpScorer::builtin().map_err(LearnError::Invalid)?;
+    let tsp = TspSettings::default();
+    let feasible = vec![true; poses.len()];
+    let mut g = InputGrid::new(GRID);
+    let (mut a, mut b, mut c, mut d, mut sizes) = (vec![], vec![], vec![], vec![], vec![]);
+    for s in 0..starts.clamp(1, poses.len()) {
+        let s = s * poses.len() / starts.clamp(1, poses.len());
+        let mut visited = vec![false; poses.len()];
+        visited[s] = true;
+        let allowed: Vec<bool> = (0..poses.len()).map(|v| v != s).collect();
+        let boot = bootstrap_view(&poses, &allowed, &poses[s]).expect("127 allowed views");
+        visited[boot] = true;
+        let frames = [render(&mesh, &cameras[s]).depth, render(&mesh, &cameras[boot]).depth];
+        let t = Instant::now();
+        g.clear();
+        g.insert_depth(&cameras[s], &frames[0]);
+        g.insert_depth(&cameras[boot], &frames[1]);
+        let t1 = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let logits = crate::mascvp_planner::SetScorer::logits(&mut scorer, &g, &visited);
+        let t2 = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let plan =
+            plan_views(&logits, 0.3, &visited, &feasible, &poses, &poses[boot], &tsp).unwrap_or_default();
+        let t3 = t.elapsed().as_secs_f64();
+        sizes.push(plan.len() as f64);
+        a.push(t1);
+        b.push(t2);
+        c.push(t3);
+        d.push(t1 + t2 + t3);
+    }
+    let mean = sizes.iter().sum::<f64>() / sizes.len() as f64;
+    Ok(([Spread::of(a), Spread::of(b), Spread::of(c), Spread::of(d)], mean))
 }

@@ -1,5 +1,6 @@
 //! Planning time of `completion-scp` and `completion-mcp` per plan (completion + steps + ILP +
-//! path) on the built-in mug at ~100k triangles, for the README ("Hybrid planners"):
+//! path) and of `completion-nbv` per step (completion + voxels + HPR gains of every candidate)
+//! on the built-in mug at ~100k triangles, for the README ("Hybrid planners"):
 //! `cargo run --profile ci -p objview-planners --example hybrid_plan_time [-- TRIANGLES]`.
 
 use std::path::Path;
@@ -9,6 +10,7 @@ use objview_episode::{run_episode, scene_from_parts, Budget, EpisodeSettings};
 use objview_geom::cloud::sample_surface;
 use objview_geom::normalize::{normalize, Normalization};
 use objview_geom::synth::build_with_triangles;
+use objview_planners::hybrid::nbv::CompletionNbv;
 use objview_planners::hybrid::plan::{CompletionPlan, PlanKind};
 use objview_planners::hybrid::HybridSettings;
 use objview_views::{start_pose, ViewSet, ViewSpace};
@@ -65,5 +67,42 @@ fn main() {
                 r.terminal_reason,
             );
         }
+    }
+    // NBV: 10 steps after the start view (cap 11 views).
+    let capped = EpisodeSettings { cap: 11, ..settings.clone() };
+    for completion in ["oracle", "identity"] {
+        let s = HybridSettings { completion: completion.into(), ..HybridSettings::default() };
+        let mut p = CompletionNbv::new(s).unwrap();
+        let r = run_episode(
+            scene.clone(),
+            &mut p,
+            &capped,
+            Budget::Auto,
+            0,
+            start_pose(3.0),
+            cands.clone(),
+            serde_json::json!({}),
+        )
+        .unwrap();
+        let steps = p.steps();
+        let n = steps.len().max(1) as f64;
+        let mean =
+            |f: &dyn Fn(&objview_planners::hybrid::nbv::NbvStep) -> f64| steps.iter().map(f).sum::<f64>() / n;
+        let max = steps.iter().map(|s| s.step_seconds).fold(0.0f64, f64::max);
+        println!(
+            "{:<26} {} steps: per step mean {:.3} s, max {:.3} s (completion {:.3}, HPR gains {:.3}); \
+             score points mean {:.0} (max {}), {} views, NSC@0.02 {:.4}, {}",
+            r.method,
+            steps.len(),
+            mean(&|s| s.step_seconds),
+            max,
+            mean(&|s| s.completion_seconds),
+            mean(&|s| s.gain_seconds),
+            mean(&|s| s.score_points as f64),
+            steps.iter().map(|s| s.score_points).max().unwrap_or(0),
+            r.visited_poses.len(),
+            r.checkpoints[&"terminal".parse().unwrap()].metrics.nsc["0.02"],
+            r.terminal_reason,
+        );
     }
 }

@@ -69,7 +69,7 @@ fn norm(a: [f64; 3]) -> f64 {
 fn make_face(p: &[[f64; 3]], v: [usize; 3]) -> Option<Face> {
     let n = cross(sub(p[v[1]], p[v[0]]), sub(p[v[2]], p[v[0]]));
     let l = norm(n);
-    if !(l > 0.0) || !l.is_finite() {
+    if l.is_nan() || l <= 0.0 || !l.is_finite() {
         return None;
     }
     let n = n.map(|x| x / l);

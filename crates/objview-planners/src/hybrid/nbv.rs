@@ -19,7 +19,7 @@
 //!    none → `candidate_exhausted`.
 //!
 //! The benchmark stops it (budget checkpoints, MS@δ); what each step did is kept in
-//! [`NbvStep`] ([`CompletionNbv::last_step`]).
+//! [`NbvStep`] ([`CompletionNbv::steps`]).
 
 use std::time::Instant;
 
@@ -116,7 +116,7 @@ pub struct CompletionNbv {
     feasible: Vec<bool>,
     rng: ChaCha8Rng,
     partial: PartialCloud,
-    step: Option<NbvStep>,
+    steps: Vec<NbvStep>,
 }
 
 /// The score points of one step and the voxel counts (module docs, step 3).
@@ -141,13 +141,18 @@ impl CompletionNbv {
             feasible: Vec::new(),
             rng: ChaCha8Rng::seed_from_u64(0),
             partial: PartialCloud::default(),
-            step: None,
+            steps: Vec::new(),
         })
     }
 
     /// What the last step did (`None` before one was made).
     pub fn last_step(&self) -> Option<&NbvStep> {
-        self.step.as_ref()
+        self.steps.last()
+    }
+
+    /// What every step of the episode did, in order.
+    pub fn steps(&self) -> &[NbvStep] {
+        &self.steps
     }
 }
 
@@ -182,7 +187,7 @@ impl Planner for CompletionNbv {
         self.feasible = env.feasible_mask(&self.candidates);
         self.rng = ChaCha8Rng::seed_from_u64(ctx.seed ^ COMPLETION_SEED_SALT);
         self.partial = PartialCloud::default();
-        self.step = None;
+        self.steps.clear();
         Ok(())
     }
     fn act(&mut self, obs: &Observation, env: &dyn Environment) -> Result<Action, PlannerError> {
@@ -210,7 +215,7 @@ impl Planner for CompletionNbv {
         let gain_seconds = t1.elapsed().as_secs_f64();
         let dist: Vec<f64> = self.candidates.iter().map(|c| pose_distance(&obs.pose, c)).collect();
         let chosen = select(&gains, &dist, self.settings.gain_ratio);
-        self.step = Some(NbvStep {
+        self.steps.push(NbvStep {
             partial_points: self.partial.points.len(),
             completed_points: completed.points.len(),
             predicted_points: completed.predicted,

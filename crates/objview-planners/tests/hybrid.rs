@@ -117,5 +117,7 @@ fn nbv_runs_short_episodes_with_feasible_unique_views() {
         );
         seen.push(c);
     }
-    assert!(seen[0] > 0.5 && seen[1] > 0.5, "{seen:?}");
+    // Measured: oracle 0.9986, identity 0.511 (with no prediction the target is empty, every
+    // observed voxel scores, and the nearest near-best view is a small move).
+    assert!(seen[0] > 0.95 && seen[1] > 0.4 && seen[1] <= seen[0], "{seen:?}");
 }

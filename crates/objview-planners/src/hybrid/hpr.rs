@@ -378,6 +378,25 @@ mod tests {
                 assert_eq!(vis[i], s > 0.0, "seed {seed}: point {i} {p:?}, s = {s}");
             }
             assert!(checked > 1500, "{checked}");
+            // Brute force on the hull itself, in HPR's regime (coordinates ~2R ≈ 700): every
+            // flipped point lies inside every face's plane.
+            let r = hpr_radius(&pts, cam);
+            let mut flipped: Vec<[f64; 3]> = pts
+                .iter()
+                .map(|p| {
+                    let q = sub(*p, cam);
+                    let l = norm(q);
+                    q.map(|x| x * (1.0 + 2.0 * (r - l) / l))
+                })
+                .collect();
+            flipped.push([0.0; 3]);
+            for f in hull_faces(&flipped).unwrap() {
+                let face = make_face(&flipped, f).unwrap();
+                assert!(
+                    flipped.iter().all(|q| dist(&face, *q) <= 1e-9),
+                    "seed {seed}: a point outside {f:?}"
+                );
+            }
             assert_eq!(hpr_count(&pts, cam), vis.iter().filter(|&&v| v).count());
         }
     }

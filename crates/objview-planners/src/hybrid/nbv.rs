@@ -36,7 +36,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::completion::{complete, Completion};
-use super::hpr::hpr_count;
+use super::hpr::Hpr;
 use super::steps::{box_keys, PartialCloud, PlanningSets, PLAN_VOXEL};
 use super::{HybridSettings, COMPLETION_SEED_SALT};
 use crate::random::same_pose;
@@ -72,6 +72,20 @@ pub fn select(gains: &[Option<usize>], dist: &[f64], ratio: f64) -> Option<usize
         }
     }
     pick
+}
+
+/// Step 4 of the module docs: per camera position, `None` where `open` is false, else the
+/// number of `points` visible from it by hidden point removal ([`super::hpr`]). Every open
+/// candidate gets its full hull: no candidate is skipped by a bound, because a hull that comes
+/// out inconsistent makes *every* point visible (gain = all points), which no bound computed
+/// before the hull is finished can exclude (README, "Hybrid planners").
+pub fn hpr_gains(points: &[[f64; 3]], cameras: &[[f64; 3]], open: &[bool]) -> Vec<Option<usize>> {
+    assert_eq!(cameras.len(), open.len());
+    cameras
+        .par_iter()
+        .zip(open)
+        .map_init(Hpr::default, |ws, (&c, &on)| on.then(|| ws.count(points, c)))
+        .collect()
 }
 
 /// What one step did.
@@ -206,12 +220,8 @@ impl Planner for CompletionNbv {
         let open: Vec<bool> = (0..self.candidates.len())
             .map(|i| self.feasible[i] && !history.iter().any(|h| same_pose(h, &self.candidates[i])))
             .collect();
-        let gains: Vec<Option<usize>> = self
-            .candidates
-            .par_iter()
-            .zip(&open)
-            .map(|(c, &on)| on.then(|| hpr_count(&points, c.center)))
-            .collect();
+        let cameras: Vec<[f64; 3]> = self.candidates.iter().map(|c| c.center).collect();
+        let gains = hpr_gains(&points, &cameras, &open);
         let gain_seconds = t1.elapsed().as_secs_f64();
         let dist: Vec<f64> = self.candidates.iter().map(|c| pose_distance(&obs.pose, c)).collect();
         let chosen = select(&gains, &dist, self.settings.gain_ratio);
@@ -265,6 +275,60 @@ mod tests {
         // Nothing to choose.
         assert_eq!(select(&[None, None], &[1.0, 2.0], 0.95), None);
         assert_eq!(select(&[], &[], 0.95), None);
+    }
+
+    /// The planner's gains (one reused HPR workspace per thread) equal the first
+    /// implementation's [`hpr_count`](super::super::hpr::reference::hpr_count) per candidate,
+    /// on random voxel-centre clouds seen from random shell positions with random closed
+    /// candidates; so does the chosen view.
+    #[test]
+    fn gains_equal_brute_force() {
+        use super::super::hpr::reference;
+        use rand::Rng;
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        for it in 0..12 {
+            // A random blob of voxel centres (1/32), ~300–900 points.
+            let c: [f64; 3] = std::array::from_fn(|_| rng.gen_range(-0.2..0.2));
+            let r = rng.gen_range(0.2..0.4);
+            let mut points = Vec::new();
+            for x in 0..64 {
+                for y in 0..64 {
+                    for z in 0..64 {
+                        let p = [x, y, z].map(|k| (k as f64 + 0.5) * PLAN_VOXEL - 1.0);
+                        let d = norm3(sub3(p, c));
+                        if (d - r).abs() < PLAN_VOXEL && rng.gen_bool(0.7) {
+                            points.push(p);
+                        }
+                    }
+                }
+            }
+            let cameras: Vec<[f64; 3]> = (0..40)
+                .map(|_| loop {
+                    let v: [f64; 3] = std::array::from_fn(|_| rng.gen_range(-1.0..1.0));
+                    let l = norm3(v);
+                    if l > 0.1 && l <= 1.0 {
+                        break v.map(|x| x / l * 3.0);
+                    }
+                })
+                .collect();
+            let open: Vec<bool> = (0..cameras.len()).map(|_| rng.gen_bool(0.8)).collect();
+            let gains = hpr_gains(&points, &cameras, &open);
+            let brute: Vec<Option<usize>> = cameras
+                .iter()
+                .zip(&open)
+                .map(|(&cam, &on)| on.then(|| reference::hpr_count(&points, cam)))
+                .collect();
+            assert_eq!(gains, brute, "instance {it}, {} points", points.len());
+            let dist: Vec<f64> = (0..cameras.len()).map(|_| rng.gen_range(0.0..3.0)).collect();
+            assert_eq!(select(&gains, &dist, 0.95), select(&brute, &dist, 0.95));
+        }
+    }
+
+    fn sub3(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+        [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+    }
+    fn norm3(a: [f64; 3]) -> f64 {
+        (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
     }
 
     #[test]

@@ -10,6 +10,8 @@ use indicatif::ProgressBar;
 use objview_dataset::Shard;
 use objview_geom::normalize::Normalization;
 use objview_learn::dataset::{DatasetPlan, DatasetSettings, InputSource, Method};
+use objview_learn::mascvp::MascvpShape;
+use objview_learn::mascvp_train::{ScvpEpochLog, ScvpProgress, ScvpTrainSettings};
 use objview_learn::train::{EpochLog, TrainProgress, TrainSettings};
 
 use crate::common::{progress, TermProgress};
@@ -74,7 +76,7 @@ pub struct DatasetArgs {
 
 #[derive(Parser)]
 pub struct TrainArgs {
-    /// The network: `nbv-net`.
+    /// The network: `nbv-net` or `ma-scvp`.
     pub network: String,
     /// The dataset folder of `objview learn dataset`.
     #[arg(long)]
@@ -88,15 +90,33 @@ pub struct TrainArgs {
     /// Batch size.
     #[arg(long, default_value_t = 8)]
     pub batch: usize,
-    /// Adam learning rate.
-    #[arg(long, default_value_t = 4e-4)]
-    pub lr: f64,
+    /// Adam learning rate (default: 4e-4 for nbv-net, 1e-4 for ma-scvp).
+    #[arg(long)]
+    pub lr: Option<f64>,
     /// Seed of initialization, dropout and case order.
     #[arg(long, default_value_t = 42)]
     pub seed: u64,
     /// Network grid: 64 (the reference shape) or 32 (the data pooled by 2; fits this machine).
     #[arg(long, default_value_t = 32)]
     pub grid: usize,
+    /// ma-scvp: conv1 and the three blocks' widths (reference: 32,64,128,256; default quarter).
+    #[arg(long, value_delimiter = ',', default_value = "8,16,32,64")]
+    pub widths: Vec<usize>,
+    /// ma-scvp: the head's hidden FC widths (the reference's by default).
+    #[arg(long, value_delimiter = ',', default_value = "512,256,128,128")]
+    pub fc: Vec<usize>,
+    /// ma-scvp: decoding threshold of the validation F1 that selects the kept epoch.
+    #[arg(long, default_value_t = 0.3)]
+    pub gamma: f64,
+    /// ma-scvp: BCE weight of positive entries.
+    #[arg(long, default_value_t = 1.5)]
+    pub pos_weight: f64,
+    /// ma-scvp: StepLR step (epochs).
+    #[arg(long, default_value_t = 20)]
+    pub lr_step: usize,
+    /// ma-scvp: StepLR factor.
+    #[arg(long, default_value_t = 0.5)]
+    pub lr_factor: f64,
     /// Fraction of objects held out for validation (by a hash of the uid).
     #[arg(long, default_value_t = 0.1)]
     pub val_fraction: f64,
@@ -106,15 +126,16 @@ pub struct TrainArgs {
     /// Worker threads (default: all cores); the weights do not depend on it.
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Which epoch's weights to keep: `val-loss` (lowest validation loss, the reference's
-    /// shipped checkpoint) or `val-acc` (best validation top-1, its trainer's default).
+    /// nbv-net: which epoch's weights to keep: `val-loss` (lowest validation loss, the
+    /// reference's shipped checkpoint) or `val-acc` (best validation top-1, its trainer's
+    /// default). ma-scvp always keeps the best validation F1 at --gamma.
     #[arg(long, default_value = "val-loss")]
     pub select: objview_learn::train::Selection,
     /// Continue from the last checkpoint of the same settings and data (with every epoch done,
     /// only re-select).
     #[arg(long)]
     pub resume: bool,
-    /// A second dataset (other objects) to report top-1 agreement on in the sidecar.
+    /// nbv-net: a second dataset (other objects) to report top-1 agreement on in the sidecar.
     #[arg(long)]
     pub heldout: Option<PathBuf>,
 }
@@ -220,14 +241,16 @@ fn pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
 }
 
 fn train(a: TrainArgs) -> Result<()> {
-    if a.network != "nbv-net" {
-        bail!("unknown network '{}' (this version trains: nbv-net)", a.network);
+    match a.network.as_str() {
+        "nbv-net" => {}
+        "ma-scvp" => return train_mascvp(a),
+        o => bail!("unknown network '{o}' (this version trains: nbv-net, ma-scvp)"),
     }
     let settings = TrainSettings {
         grid: a.grid,
         epochs: a.epochs,
         batch: a.batch,
-        lr: a.lr,
+        lr: a.lr.unwrap_or(4e-4),
         seed: a.seed,
         val_fraction: a.val_fraction,
         max_cases: a.max_cases,
@@ -252,6 +275,62 @@ fn train(a: TrainArgs) -> Result<()> {
         sidecar["best_epoch"],
         sidecar["final"]["val_loss"].as_f64().unwrap_or(f64::NAN),
         sidecar["final"]["val_acc"].as_f64().unwrap_or(f64::NAN),
+        a.out.display(),
+        objview_learn::train::sidecar_path(&a.out).display()
+    );
+    Ok(())
+}
+
+impl ScvpProgress for BarProgress {
+    fn batch(&self, epoch: usize, done: usize, total: usize, loss: f64) {
+        TrainProgress::batch(self, epoch, done, total, loss);
+    }
+    fn epoch(&self, l: &ScvpEpochLog) {
+        if let Some((_, b)) = self.bar.lock().unwrap_or_else(std::sync::PoisonError::into_inner).take() {
+            b.finish_and_clear();
+        }
+        eprintln!(
+            "epoch {} (lr {:.2e}): train loss {:.3} | val loss {:.3} F1 {:.3} (P {:.3} R {:.3}, |pred| {:.1} vs |label| {:.1}) | {:.0} s, {:.2} samples/s",
+            l.epoch, l.lr, l.train_loss, l.val_loss, l.val.f1, l.val.precision, l.val.recall, l.val.pred_size,
+            l.val.label_size, l.seconds, l.samples_per_s
+        );
+    }
+}
+
+fn train_mascvp(a: TrainArgs) -> Result<()> {
+    if a.heldout.is_some() {
+        bail!("--heldout is an nbv-net option (ma-scvp reports validation F1 and a baseline)");
+    }
+    let [conv1, b1, b2, b3] = a.widths[..] else {
+        bail!("--widths needs four numbers (conv1 and the three blocks), got {:?}", a.widths);
+    };
+    let shape = MascvpShape { grid: a.grid, conv1, blocks: [b1, b2, b3], fc: a.fc.clone(), dropout: 0.35 };
+    let settings = ScvpTrainSettings {
+        shape,
+        epochs: a.epochs,
+        batch: a.batch,
+        lr: a.lr.unwrap_or(1e-4),
+        lr_step: a.lr_step,
+        lr_factor: a.lr_factor,
+        pos_weight: a.pos_weight,
+        gamma: a.gamma,
+        seed: a.seed,
+        val_fraction: a.val_fraction,
+        max_cases: a.max_cases,
+    };
+    let command = command_line();
+    let progress = BarProgress { bar: Mutex::new(None) };
+    let sidecar = pool(a.threads)?.install(|| {
+        objview_learn::mascvp_train::train_scvp_and_describe(
+            &a.data, &a.out, &settings, a.resume, &command, &progress,
+        )
+    })?;
+    println!(
+        "learn train ma-scvp: best epoch {} (val F1 {:.3} at gamma {}; most-frequent baseline {:.3}) -> {} (+ {})",
+        sidecar["best_epoch"],
+        sidecar["final"]["val"]["f1"].as_f64().unwrap_or(f64::NAN),
+        a.gamma,
+        sidecar["baseline"]["val"]["f1"].as_f64().unwrap_or(f64::NAN),
         a.out.display(),
         objview_learn::train::sidecar_path(&a.out).display()
     );

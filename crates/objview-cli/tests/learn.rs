@@ -177,3 +177,69 @@ fn slurm_shards_merge_into_one_dataset() {
         );
     }
 }
+
+/// `learn dataset --method ma-scvp`, `learn train ma-scvp` (a tiny shape, one epoch) with its
+/// sidecar, and `run --planner ma-scvp` with those weights, end to end.
+#[test]
+fn mascvp_dataset_train_and_run() {
+    let dir = tempdir();
+    let pool = dir.path().join("pool");
+    objview_ok(&["objects", "synth", "--count", "1", "--seed", "4", "--out", s(&pool)]);
+    let data = dir.path().join("data");
+    objview_ok(&["learn", "dataset", s(&pool), "--method", "ma-scvp", "--out", s(&data), "--threads", "2"]);
+    let w = dir.path().join("m.safetensors");
+    let out = objview_ok(&[
+        "learn",
+        "train",
+        "ma-scvp",
+        "--data",
+        s(&data),
+        "--out",
+        s(&w),
+        "--epochs",
+        "1",
+        "--grid",
+        "16",
+        "--widths",
+        "2,2,2,4",
+        "--fc",
+        "16",
+        "--max-cases",
+        "8",
+        "--val-fraction",
+        "0",
+        "--seed",
+        "3",
+    ]);
+    assert!(out.contains("learn train ma-scvp: best epoch 1"), "{out}");
+    let side: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("m.json")).unwrap()).unwrap();
+    assert_eq!(side["network"], "ma-scvp");
+    assert_eq!(side["settings"]["shape"]["blocks"], serde_json::json!([2, 2, 4]));
+    assert_eq!(side["settings"]["lr"], 1e-4, "MA-SCVP's default learning rate");
+    assert!(side["deviation"].as_str().unwrap().contains("16^3"));
+    assert!(side["baseline"]["k"].is_u64() && side["beats_baseline"].is_boolean());
+    let err =
+        objview_err(&["learn", "train", "ma-scvp", "--data", s(&data), "--out", s(&w), "--widths", "2,2,2"]);
+    assert!(err.contains("--widths needs four numbers"), "{err}");
+
+    let results = dir.path().join("r.jsonl");
+    let weights = format!("weights={}", w.display());
+    objview_ok(&[
+        "run",
+        "--planner",
+        "ma-scvp",
+        "--param",
+        &weights,
+        "--objects",
+        s(&pool),
+        "--out",
+        s(&results),
+    ]);
+    let line: Value =
+        serde_json::from_str(std::fs::read_to_string(&results).unwrap().lines().next().unwrap()).unwrap();
+    assert_eq!(line["method"], "ma-scvp");
+    assert_eq!(line["execution_mode"], "set_cover_plan");
+    let reason = line["terminal_reason"].as_str().unwrap();
+    assert!(["plan_end", "candidate_exhausted"].contains(&reason), "{reason}");
+}

@@ -1,18 +1,22 @@
 //! Learned view planners and everything they share: the network input grid with OctoMap's
 //! semantics ([`input_grid`]), oracle training data from per-view visible voxel sets
 //! ([`rollout`], [`sampling`], [`dataset`], written as NumPy [`npz`] shards), the Burn models
-//! ([`nbvnet`]), their training loop ([`train`]) and the planners in episodes ([`planner`], with
-//! this crate's registry [`TABLE`]).
+//! ([`nbvnet`], [`mascvp`]), their training loops ([`train`], [`mascvp_train`]) and the planners
+//! in episodes ([`planner`], [`mascvp_planner`], with this crate's registry [`TABLE`]).
 //!
 //! Why a crate of its own: Burn is a large dependency; the geometry, episode and server crates
 //! never compile it. The CLI combines this crate's [`TABLE`] with the classical planners'.
 //!
 //! Data flow: pool → `learn dataset` (NPZ + manifest) → `learn train` (weights + sidecar JSON)
-//! → planner `nbv-net` (`weights=FILE`, default the shipped `data/weights/nbv-net.*`).
+//! → planners `nbv-net` and `ma-scvp` (`weights=FILE`, default the shipped
+//! `data/weights/{nbv-net,ma-scvp}.*`).
 
 pub mod bench;
 pub mod dataset;
 pub mod input_grid;
+pub mod mascvp;
+pub mod mascvp_planner;
+pub mod mascvp_train;
 pub mod nbvnet;
 pub mod npz;
 pub mod planner;

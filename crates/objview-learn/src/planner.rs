@@ -1,4 +1,5 @@
-//! The learned planners in episodes, and this crate's registry table ([`TABLE`]).
+//! The learned planners in episodes, and this crate's registry table ([`TABLE`]: `nbv-net`
+//! here, `ma-scvp` in [`crate::mascvp_planner`]).
 //!
 //! **`nbv-net`** (family learned, iterative, Tammes-128 at the start pose's radius): every
 //! observation is inserted into the 64³ input grid ([`crate::input_grid`]); the grid (pooled
@@ -42,7 +43,7 @@ pub const BUILTIN_WEIGHTS: &[u8] = include_bytes!("../../../data/weights/nbv-net
 pub const BUILTIN_SIDECAR: &str = include_str!("../../../data/weights/nbv-net.json");
 
 /// This crate's planners.
-pub const TABLE: &[PlannerEntry] = &[NBV_NET_ENTRY];
+pub const TABLE: &[PlannerEntry] = &[NBV_NET_ENTRY, crate::mascvp_planner::MA_SCVP_ENTRY];
 
 /// The registry row of `nbv-net`.
 pub const NBV_NET_ENTRY: PlannerEntry = PlannerEntry {

@@ -302,7 +302,8 @@ impl TrainProgress for Quiet {
     fn epoch(&self, _: &EpochLog) {}
 }
 
-fn mix(seed: u64, k: u64) -> u64 {
+/// A seed derived from `seed` and `k` (SplitMix64 of both).
+pub(crate) fn mix(seed: u64, k: u64) -> u64 {
     splitmix64(seed ^ splitmix64(k.wrapping_add(0x9e37_79b9)))
 }
 

@@ -49,3 +49,37 @@ fn shipped_weights_load_and_match_their_sidecar() {
     assert!((a - b).abs() < 1e-9, "loss {a} vs {b}");
     assert!(r["agreement"].as_f64().unwrap() > 4.0 / 128.0, "well above chance (1/128)");
 }
+
+/// The shipped MA-SCVP weights: they load into the shape their sidecar records, their hash and
+/// parameter count are the sidecar's, the sidecar states the scaled-shape deviation, the
+/// commands and the data, and the network scores a grid with finite logits.
+#[test]
+fn shipped_mascvp_weights_load_and_match_their_sidecar() {
+    use objview_learn::mascvp::MascvpShape;
+    use objview_learn::mascvp_planner::{MascvpScorer, SetScorer, BUILTIN_SIDECAR, BUILTIN_WEIGHTS};
+    let side: Value = serde_json::from_str(BUILTIN_SIDECAR).unwrap();
+    for key in ["command", "data", "settings", "history", "final", "baseline", "deviation", "version"] {
+        assert!(!side[key].is_null(), "sidecar field {key}");
+    }
+    assert!(side["command"].as_str().unwrap().contains("learn train ma-scvp"));
+    assert!(side["data"]["dataset_command"].as_str().unwrap().contains("--method ma-scvp"));
+    assert_eq!(side["data"]["method"], "ma-scvp");
+    let shape: MascvpShape = serde_json::from_value(side["settings"]["shape"].clone()).unwrap();
+    assert_eq!(shape, MascvpShape::scaled(), "the shipped weights are the scaled default shape");
+    assert_eq!(side["deviation"].as_str().unwrap(), shape.deviation());
+    assert_eq!(
+        side["weights_fnv1a64"].as_str().unwrap(),
+        format!("{:016x}", objview_geom::hash::fnv1a64(BUILTIN_WEIGHTS))
+    );
+    let mut scorer = MascvpScorer::builtin().expect("the shipped weights load");
+    assert_eq!(shape.trainable_params(scorer.net()) as u64, side["params"].as_u64().unwrap());
+    let best = side["best_epoch"].as_u64().unwrap() as usize;
+    assert_eq!(side["final"]["val"], side["history"][best - 1]["val"], "final = the kept epoch");
+    let mut grid = objview_learn::input_grid::InputGrid::new(64);
+    grid.insert_points([3.0, 0.0, 0.0], &[[0.2, 0.1, 0.0], [0.0, 0.3, 0.1]]);
+    let mut visited = vec![false; 128];
+    visited[3] = true;
+    let logits = scorer.logits(&grid, &visited);
+    assert_eq!(logits.len(), 128);
+    assert!(logits.iter().all(|x| x.is_finite()));
+}

@@ -109,8 +109,9 @@ fn draw(feasible: &[usize], k: usize, seed: u64) -> Vec<usize> {
 }
 
 /// Shell distances between all pairs of `poses` (normalized object units), each pair computed
-/// once and mirrored so the matrix is exactly symmetric.
-fn distance_matrix(poses: &[Pose]) -> Vec<Vec<f64>> {
+/// once and mirrored so the matrix is exactly symmetric (also the learned set-cover planners'
+/// ordering input).
+pub fn distance_matrix(poses: &[Pose]) -> Vec<Vec<f64>> {
     let n = poses.len();
     let mut dist = vec![vec![0.0; n]; n];
     for i in 0..n {

@@ -14,6 +14,13 @@ use objview_planners::registry::with_params;
 use objview_views::{start_pose, ViewSet, ViewSpace};
 use serde_json::json;
 
+/// How far `identity` may come out above `oracle` (NSC@0.02, a fraction of the reference
+/// points). The oracle's plan is optimal for the needed 1/32 voxels, not for the 0.02 coverage
+/// of single reference points, and the solver may return another plan of equal voxel value
+/// (seen once in CI on a loaded machine: MCP K = 5 on the torus, identity 1.0 vs oracle
+/// 0.99999, one reference point). More than 0.1 % would be a real inversion.
+const BOUND_SLACK: f64 = 1e-3;
+
 fn scene(name: &str) -> Arc<Scene> {
     let mesh = build(name, Detail { segments: 24 }).unwrap();
     let (mesh, _) = normalize(mesh, Normalization::Unit, Path::new(name)).unwrap();
@@ -54,7 +61,7 @@ fn oracle_scp_covers_a_convex_object_and_identity_never_beats_oracle() {
             "{name}: SCP NSC@0.02 oracle {o:.4} ({} views), identity {i:.4}",
             oracle.visited_poses.len()
         );
-        assert!(i <= o, "{name}: identity {i} beats oracle {o}");
+        assert!(i <= o + BOUND_SLACK, "{name}: identity {i} beats oracle {o}");
         // The cube is covered by the start view and its antipode alone (nothing is needed);
         // the torus needs a real plan (7 views), and the oracle's covers all of it.
         assert!(o >= 0.99, "{name}: oracle SCP NSC@0.02 = {o}");
@@ -70,7 +77,7 @@ fn oracle_scp_covers_a_convex_object_and_identity_never_beats_oracle() {
         }
         let (o, i) = (nsc(&om, "0.02"), nsc(&im, "0.02"));
         eprintln!("{name}: MCP K=5 NSC@0.02 oracle {o:.4}, identity {i:.4}");
-        assert!(i <= o + 1e-9, "{name}: MCP identity {i} beats oracle {o}");
+        assert!(i <= o + BOUND_SLACK, "{name}: MCP identity {i} beats oracle {o}");
     }
 }
 

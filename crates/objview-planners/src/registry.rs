@@ -124,6 +124,7 @@ pub const TABLE: &[PlannerEntry] = &[
     crate::rse::RSE_MOV_ENTRY,
     crate::random::ENTRY,
     crate::oracle::ENTRY,
+    crate::hybrid::NBV_ENTRY,
     crate::hybrid::SCP_ENTRY,
     crate::hybrid::MCP_ENTRY,
 ];
@@ -300,11 +301,11 @@ mod tests {
         let err = |name: &str, params: &[(String, Value)]| with_params(name, params).err().unwrap();
         assert_eq!(
             by_name("x").err().unwrap(),
-            "unknown planner \"x\" (known: random-tsp, rse, rse-mov, random, oracle, completion-scp, completion-mcp)"
+            "unknown planner \"x\" (known: random-tsp, rse, rse-mov, random, oracle, completion-nbv, completion-scp, completion-mcp)"
         );
         assert_eq!(
             err("x", &[("a".into(), json!(1))]),
-            "unknown planner \"x\" (known: random-tsp, rse, rse-mov, random, oracle, completion-scp, completion-mcp)"
+            "unknown planner \"x\" (known: random-tsp, rse, rse-mov, random, oracle, completion-nbv, completion-scp, completion-mcp)"
         );
         assert_eq!(err("random", &[("x".into(), json!(1))]), "planner random has no parameters");
         assert_eq!(err("rse", &[("gamma.x".into(), json!(1))]), "planner rse has no parameter \"gamma.x\"");
@@ -422,7 +423,7 @@ mod tests {
         );
         assert_eq!(registry.by_name("rse").unwrap().name(), "rse");
         assert!(registry.get("nope").err().unwrap().ends_with(
-            "(known: random-tsp, rse, rse-mov, random, oracle, completion-scp, completion-mcp, echo)"
+            "(known: random-tsp, rse, rse-mov, random, oracle, completion-nbv, completion-scp, completion-mcp, echo)"
         ));
         // The built-in wrappers do not see other tables.
         assert!(by_name("echo").is_err());

@@ -9,7 +9,8 @@
 //!   and occluders, candidate covers by the `inverse` ray rule of `objview-voxel`).
 //! - [`cover`]: exact set cover and max coverage (HiGHS), farthest-point fill.
 //! - [`plan`]: `completion-scp` and `completion-mcp`.
-//! - [`nbv`]: `completion-nbv` with hidden-point removal.
+//! - [`hpr`]: hidden point removal on an exact-index convex hull.
+//! - [`nbv`]: `completion-nbv` (next best view by hidden point removal).
 //!
 //! Why a module of its own: the three planners share everything but the last step, and the
 //! completion backend is a parameter (`completion=net|oracle|identity`) whose value is part of
@@ -18,6 +19,7 @@
 
 pub mod completion;
 pub mod cover;
+pub mod hpr;
 pub mod nbv;
 pub mod plan;
 pub mod steps;
@@ -80,6 +82,19 @@ fn build_plan(
     let s = settings_from(name, settings, HybridSettings::default)?;
     Ok(Box::new(CompletionPlan::new(kind, s).map_err(|e| format!("planner {name}: {e}"))?))
 }
+
+/// The registry row of `completion-nbv`.
+pub const NBV_ENTRY: PlannerEntry = PlannerEntry {
+    name: "completion-nbv",
+    family: Family::Hybrid,
+    mode: ExecutionMode::Iterative,
+    summary: "completion (completion=net|oracle|identity) + next best view by hidden point removal",
+    defaults: || settings_json(&HybridSettings::default()),
+    build: |s| {
+        let s = settings_from("completion-nbv", s, HybridSettings::default)?;
+        Ok(Box::new(nbv::CompletionNbv::new(s).map_err(|e| format!("planner completion-nbv: {e}"))?))
+    },
+};
 
 /// The registry row of `completion-scp`.
 pub const SCP_ENTRY: PlannerEntry = PlannerEntry {

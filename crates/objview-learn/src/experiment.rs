@@ -627,11 +627,16 @@ pub fn run_experiment(
             train_progress,
         )?;
         timings.insert(format!("train_{name}"), t.elapsed().as_secs_f64());
+        let val = if side["data"]["val_cases"].as_u64().unwrap_or(0) == 0 {
+            "no validation objects: last epoch kept".to_string()
+        } else {
+            format!("val F1 {:.3}", side["final"]["val"]["f1"].as_f64().unwrap_or(f64::NAN))
+        };
         log.stage(&format!(
-            "train {name}: best epoch {} of {}, val F1 {:.3} -> {}",
+            "train {name}: kept epoch {} of {} ({val}; {} training cases) -> {}",
             side["best_epoch"],
             settings.train.epochs,
-            side["final"]["val"]["f1"].as_f64().unwrap_or(f64::NAN),
+            side["data"]["train_cases"],
             w.display()
         ));
         sidecars.insert(

@@ -406,8 +406,15 @@ pub fn comparison(lines: &[ObjectVc]) -> Value {
         let diffs: Vec<f64> = objs.iter().map(|o| get(o, "balanced") - get(o, "raw")).collect();
         let raw: Vec<f64> = objs.iter().map(|o| get(o, "raw")).collect();
         let bal: Vec<f64> = objs.iter().map(|o| get(o, "balanced")).collect();
+        let size = |m: &str| -> Vec<f64> {
+            objs.iter().map(|o| o.models.get(m).map_or(f64::NAN, |x| x.pred_total_mean)).collect()
+        };
+        let gt: Vec<f64> = objs.iter().map(|o| o.gt_total_mean).collect();
         json!({
             "objects": objs.len(),
+            "raw_pred_total_mean": mean_std(&size("raw")).0,
+            "balanced_pred_total_mean": mean_std(&size("balanced")).0,
+            "gt_total_mean": mean_std(&gt).0,
             "raw_vc_mean": mean_std(&raw).0,
             "balanced_vc_mean": mean_std(&bal).0,
             "balanced_minus_raw": mean_std(&diffs).0,
@@ -737,6 +744,11 @@ pub fn run_experiment(
             "this_run": timings,
             "data_cpu_seconds": data_seconds,
             "analysis_cpu_seconds": lines.iter().map(|l| l.seconds).sum::<f64>(),
+            "train_seconds": sidecars.iter().map(|(k, v)| {
+                let epochs = v["epochs"].as_array().map_or(0.0, |h| h.iter().filter_map(|e| e["seconds"].as_f64()).sum::<f64>());
+                (k.clone(), json!(epochs))
+            }).collect::<serde_json::Map<_, _>>(),
+            "note": "this_run: wall seconds of the last invocation (a resumed run skips finished work); data and analysis: summed per-object seconds; train: summed epoch seconds",
         },
         "files": {"splits": "splits/", "data": "data/", "models": "models/", "vc": VC_FILE},
         "version": crate::VERSION,
@@ -842,6 +854,8 @@ mod tests {
         );
         assert_eq!(c["balanced_better_on_medium_high"], true);
         assert_eq!(c["low"]["objects"], 2);
+        assert_eq!(c["all"]["raw_pred_total_mean"], 3.0);
+        assert_eq!(c["all"]["gt_total_mean"], 4.0);
         assert_eq!(mean_std(&[]), (0.0, 0.0));
     }
 

@@ -96,10 +96,21 @@ pub fn caption(summary: &Value) -> String {
             c["objects"], diff, c["balanced_wins"], c["balanced_losses"], c["ties"]
         )
     };
+    let all = &summary["comparison"]["all"];
+    let sizes = if all["gt_total_mean"].is_number() {
+        format!(
+            " Mean planned views (start + decoded) over all analysis objects: raw {:.2}, balanced {:.2}, ground truth (start + exact residual cover) {:.2}; VC does not charge for set size.",
+            num(&all["raw_pred_total_mean"]),
+            num(&all["balanced_pred_total_mean"]),
+            num(&all["gt_total_mean"])
+        )
+    } else {
+        String::new()
+    };
     format!(
         "MA-SCVP ({}) trained with one recipe and seed on Main-Raw-Train and Main-Balanced-Train ({} objects each, {} epochs); \
          VC at gamma {} over the 128 start views of {} Main-Analysis-Test objects; error bars: population std over the bucket's objects; n = objects. \
-         {verdict}. objview {}.",
+         {verdict}.{sizes} objview {}.",
         s["train"]["shape"]["grid"].as_u64().map(|g| format!("{g}^3")).unwrap_or_default(),
         s["size"],
         s["train"]["epochs"],
@@ -258,6 +269,7 @@ mod tests {
                 "medium_high": {"objects": 2, "balanced_minus_raw": if better { 0.025 } else { -0.025 },
                                 "balanced_wins": if better { 1 } else { 0 }, "balanced_losses": if better { 0 } else { 1 }, "ties": 1},
                 "balanced_better_on_medium_high": better,
+                "all": {"raw_pred_total_mean": 1.0, "balanced_pred_total_mean": 4.5, "gt_total_mean": 6.25},
             },
         })
     }
@@ -268,6 +280,10 @@ mod tests {
         let c = caption(&summary(false));
         assert!(c.contains("balanced does NOT beat raw: -0.0250"), "{c}");
         assert!(c.contains("6 objects each") && c.contains("16^3") && c.contains("gamma 0.5"), "{c}");
+        assert!(
+            c.contains("raw 1.00, balanced 4.50, ground truth (start + exact residual cover) 6.25"),
+            "{c}"
+        );
     }
 
     #[test]

@@ -12,6 +12,7 @@
 //! `data/weights/{nbv-net,ma-scvp}.*`).
 
 pub mod bench;
+pub mod checkpoint;
 pub mod dataset;
 pub mod experiment;
 pub mod input_grid;

@@ -25,8 +25,7 @@ use std::time::Instant;
 use burn::module::Module;
 use burn::nn::loss::CrossEntropyLossConfig;
 use burn::optim::grad_clipping::GradientClippingConfig;
-use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer, OptimizerRecord};
-use burn::store::{BurnpackStore, ModuleSnapshot, SafetensorsStore};
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Int, Tensor, TensorData};
 use objview_geom::hash::{fnv1a64, splitmix64};
 use rand::seq::SliceRandom;
@@ -36,6 +35,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
+use crate::checkpoint::{trajectory_settings, Checkpoints};
 use crate::dataset::{FORMAT, FORMAT_VERSION};
 use crate::input_grid::pool_grid;
 use crate::nbvnet::NbvNet;
@@ -385,22 +385,12 @@ pub fn sidecar_path(out: &Path) -> PathBuf {
     out.with_extension("json")
 }
 
-/// The checkpoint folder of a run writing `out`.
-pub fn checkpoint_dir(out: &Path) -> PathBuf {
-    let mut s = out.as_os_str().to_owned();
-    s.push(".checkpoints");
-    PathBuf::from(s)
-}
+/// The checkpoint folder of a run writing `out` (see [`crate::checkpoint`]).
+pub use crate::checkpoint::checkpoint_dir;
 
-/// Saves `net` as safetensors at `path`.
+/// Saves `net` as safetensors at `path` (reproducible bytes).
 pub fn save_weights(net: &NbvNet, path: &Path) -> Result<(), LearnError> {
-    // One metadata key: burn's default metadata is a HashMap, whose order (and so the file's
-    // bytes) would change from run to run.
-    let mut store = SafetensorsStore::from_file(path)
-        .clear_metadata()
-        .metadata("producer", "objview (burn 0.22.1)")
-        .overwrite(true);
-    net.save_into(&mut store).map_err(|e| LearnError::io(path, format!("cannot save weights: {e:?}")))
+    crate::checkpoint::save_safetensors(net, path)
 }
 
 /// Loads weights into a fresh G³ network on `device`.
@@ -412,14 +402,7 @@ pub fn load_weights(path: &Path, grid: usize, device: &Device) -> Result<NbvNet,
 /// Loads safetensors bytes into a fresh G³ network on `device`; every tensor must be present.
 pub fn load_weights_bytes(bytes: &[u8], grid: usize, device: &Device) -> Result<NbvNet, String> {
     let mut net = NbvNet::new(grid, device);
-    let mut store = SafetensorsStore::from_bytes(Some(bytes.to_vec()));
-    let r = net.load_from(&mut store).map_err(|e| format!("cannot load weights: {e:?}"))?;
-    if !r.errors.is_empty() || !r.missing.is_empty() {
-        return Err(format!(
-            "weights do not fit a {grid}³ NBV-Net: missing {:?}, errors {:?}",
-            r.missing, r.errors
-        ));
-    }
+    crate::checkpoint::load_safetensors(&mut net, bytes, &format!("a {grid}³ NBV-Net"))?;
     Ok(net)
 }
 
@@ -457,45 +440,23 @@ pub fn train(
         .init();
     let ce = CrossEntropyLossConfig::new().init(&device);
 
-    let ckpt = checkpoint_dir(out);
-    std::fs::create_dir_all(&ckpt).map_err(|e| LearnError::io(&ckpt, e))?;
-    let state_path = ckpt.join("state.json");
+    // The epoch count and the selection rule do not change the trajectory.
     let settings_json = serde_json::to_value(settings).expect("settings serialize");
+    let identity = json!({
+        "network": "nbv-net",
+        "settings": trajectory_settings(&settings_json, &["epochs", "select"]),
+        "data": data.display().to_string(),
+    });
+    let ckpt = Checkpoints::create(out, identity)?;
     let mut history: Vec<EpochLog> = Vec::new();
-    let mut start_epoch = 1;
-    if resume && state_path.is_file() {
-        let text = std::fs::read_to_string(&state_path).map_err(|e| LearnError::io(&state_path, e))?;
-        let st: Value = serde_json::from_str(&text).map_err(|e| LearnError::io(&state_path, e))?;
-        // The epoch count and the selection rule do not change the trajectory.
-        let mut same = st["settings"].clone();
-        let mut want = settings_json.clone();
-        for v in [&mut same, &mut want] {
-            if let Some(m) = v.as_object_mut() {
-                m.remove("epochs");
-                m.remove("select");
-            }
-        }
-        if same != want || st["data"] != json!(data.display().to_string()) {
-            return Err(LearnError::Invalid(format!(
-                "{}: the checkpoint was made with other settings or data; remove the folder or drop --resume",
-                state_path.display()
-            )));
-        }
-        history =
-            serde_json::from_value(st["history"].clone()).map_err(|e| LearnError::io(&state_path, e))?;
-        history.truncate(settings.epochs);
-        let k = history.len();
-        start_epoch = k + 1;
-        if k > 0 && k < settings.epochs {
-            // Burnpack keeps the parameter ids the optimizer state is keyed by.
-            let w = ckpt.join(format!("epoch-{k}.bpk"));
-            let mut store = BurnpackStore::from_file(&w);
-            net.load_from(&mut store).map_err(|e| LearnError::io(&w, format!("{e:?}")))?;
-            let o = ckpt.join(format!("epoch-{k}.optim"));
-            let rec = OptimizerRecord::load(&o).map_err(|e| LearnError::io(&o, format!("{e:?}")))?;
+    if resume {
+        let (h, rec) = ckpt.resume(settings.epochs, &mut net)?;
+        history = h;
+        if let Some(rec) = rec {
             optim = optim.load_record(rec);
         }
     }
+    let start_epoch = history.len() + 1;
 
     for epoch in start_epoch..=settings.epochs {
         let t = Instant::now();
@@ -538,20 +499,11 @@ pub fn train(
         };
         progress.epoch(&log);
         history.push(log);
-        save_weights(&valid, &ckpt.join(format!("epoch-{epoch}.safetensors")))?;
-        let bpk = ckpt.join(format!("epoch-{epoch}.bpk"));
-        net.save_into(&mut BurnpackStore::from_file(&bpk).overwrite(true))
-            .map_err(|e| LearnError::io(&bpk, format!("cannot save the checkpoint: {e:?}")))?;
-        let o = ckpt.join(format!("epoch-{epoch}.optim"));
-        optim.to_record().save(&o).map_err(|e| LearnError::io(&o, format!("{e:?}")))?;
-        let st = json!({"settings": settings_json, "data": data.display().to_string(), "history": history});
-        std::fs::write(&state_path, serde_json::to_string_pretty(&st).expect("json"))
-            .map_err(|e| LearnError::io(&state_path, e))?;
+        ckpt.save(epoch, &valid, &net, &optim, &history)?;
     }
 
     let best_epoch = select_epoch(&history, settings.select, !val_set.is_empty());
-    let best = ckpt.join(format!("epoch-{best_epoch}.safetensors"));
-    std::fs::copy(&best, out).map_err(|e| LearnError::io(out, e))?;
+    ckpt.keep(best_epoch, out)?;
     Ok((
         TrainOutcome { history, best_epoch, cases: (train_set.len(), val_set.len()), val_objects, params },
         train_set,

@@ -303,7 +303,16 @@ mod tests {
         // One error bar per point: 3 buckets × 2 models, each ± std (clamped to [0, 1]).
         let bars: Vec<&Series> = b.series.iter().filter(|s| s.name.is_empty()).collect();
         assert_eq!(bars.len(), 6);
-        assert_eq!(bars[0].points, vec![(-0.08, 0.85), (-0.08, 0.95)]);
+        let want = [(-0.08, 0.85), (-0.08, 0.95)];
+        assert!(
+            bars[0]
+                .points
+                .iter()
+                .zip(want)
+                .all(|(a, b)| (a.0 - b.0).abs() < 1e-12 && (a.1 - b.1).abs() < 1e-12),
+            "{:?}",
+            bars[0].points
+        );
         let dir = tempfile::tempdir().unwrap();
         let files = write(&summary(true), dir.path()).unwrap();
         assert_eq!(files.len(), 3);

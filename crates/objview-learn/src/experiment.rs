@@ -41,7 +41,7 @@ use objview_dataset::{
 use objview_difficulty::CoverStatus;
 use objview_pool::split::{analysis_test, bucket_label, bucket_of, proven_d_plan, SplitSettings};
 use objview_render::{render, Camera};
-use objview_voxel::bitset_count;
+use objview_voxel::{bitset_count, union_into};
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
@@ -198,9 +198,7 @@ pub fn voxel_coverage(coverage: &Coverage, start: usize, decoded: &[usize]) -> f
     }
     let mut covered = coverage.sets[start].clone();
     for &v in decoded {
-        for (c, a) in covered.iter_mut().zip(&coverage.sets[v]) {
-            *c |= a;
-        }
+        union_into(&mut covered, &coverage.sets[v]);
     }
     bitset_count(&covered) as f64 / u as f64
 }
@@ -761,13 +759,7 @@ pub fn run_experiment(
 mod tests {
     use super::*;
 
-    fn bits(elems: &[usize], n: usize) -> Vec<u64> {
-        let mut b = vec![0u64; n.div_ceil(64)];
-        for &e in elems {
-            b[e / 64] |= 1 << (e % 64);
-        }
-        b
-    }
+    use objview_voxel::to_bitset as bits;
 
     /// VC on a hand-built coverage instance: 4 views over 10 voxels, U = {0..8} (voxel 9 seen
     /// by nobody). Start 0 = {0,1,2}; decoded {1} = {2,3} → {0,1,2,3} = 4/9; decoded {2, 3}

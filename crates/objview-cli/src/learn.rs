@@ -182,7 +182,7 @@ pub struct TrainArgs {
     /// Batch size.
     #[arg(long, default_value_t = 8)]
     pub batch: usize,
-    /// Adam learning rate (default: 4e-4 for nbv-net, 1e-4 for ma-scvp, 5e-4 for completion).
+    /// Adam learning rate (default: 4e-4 for nbv-net, 1e-4 for ma-scvp, 1e-3 for completion).
     #[arg(long)]
     pub lr: Option<f64>,
     /// Seed of initialization, dropout and case order.
@@ -210,10 +210,10 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = 0.5)]
     pub lr_factor: f64,
     /// completion: encoder widths e1,e2,e3,G (stage 1 3->e1->e2, stage 2 2*e2->e3->G; default
-    /// 64,128,256,256).
+    /// 64,128,256,512).
     #[arg(long, value_delimiter = ',')]
     pub encoder: Option<Vec<usize>>,
-    /// completion: hidden widths of the coarse decoder (default 256,256).
+    /// completion: hidden widths of the coarse decoder (default 512,512).
     #[arg(long, value_delimiter = ',')]
     pub coarse_fc: Option<Vec<usize>>,
     /// completion: hidden width of the folding MLP (default 64).
@@ -520,7 +520,7 @@ fn train_completion(a: TrainArgs) -> Result<()> {
         shape,
         epochs: a.epochs,
         batch: a.batch,
-        lr: a.lr.unwrap_or(5e-4),
+        lr: a.lr.unwrap_or(1e-3),
         lr_step: a.lr_step,
         lr_factor: a.lr_factor,
         loss_gt_points: a.loss_gt_points,

@@ -56,12 +56,12 @@ pub struct CompletionShape {
 }
 
 impl CompletionShape {
-    /// The default trained here: encoder 64/128/256/256, coarse FC 256/256 → 96 points, folding
+    /// The default trained here: encoder 64/128/256/512, coarse FC 512/512 → 96 points, folding
     /// 8 × 8 per coarse point (PoinTr's 96 × 64 layout) with width 64, grid half side 0.05.
     pub fn small() -> CompletionShape {
         CompletionShape {
-            encoder: [64, 128, 256, 256],
-            coarse_fc: vec![256, 256],
+            encoder: [64, 128, 256, 512],
+            coarse_fc: vec![512, 512],
             coarse: 96,
             fold_grid: 8,
             fold_width: 64,
@@ -489,12 +489,12 @@ mod tests {
         s.validate().unwrap();
         let net = CompletionNet::new(&s, &device);
         assert_eq!(net.num_params(), s.params());
-        // Hand count of the default: encoder 3·64+64 + 64·128+128 + 256·256+256 + 256·256+256,
-        // coarse 256·256+256 + 256·256+256 + 256·288+288, folding 256·64+64 + 2·64 + 3·64 +
+        // Hand count of the default: encoder 3·64+64 + 64·128+128 + 256·256+256 + 256·512+512,
+        // coarse 512·512+512 + 512·512+512 + 512·288+288, folding 512·64+64 + 2·64 + 3·64 +
         // 64·64+64 + 64·3+3.
-        let enc = 256 + 8320 + 65_792 + 65_792;
-        let coarse = 65_792 + 65_792 + 74_016;
-        let fold = 16_448 + 128 + 192 + 4160 + 195;
+        let enc = 256 + 8320 + 65_792 + 131_584;
+        let coarse = 262_656 + 262_656 + 147_744;
+        let fold = 32_832 + 128 + 192 + 4160 + 195;
         assert_eq!(s.params(), enc + coarse + fold);
         let x = Tensor::<3>::from_data(
             TensorData::new(

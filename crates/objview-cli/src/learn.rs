@@ -494,10 +494,17 @@ impl CompletionProgress for BarProgress {
         if let Some((_, b)) = self.bar.lock().unwrap_or_else(std::sync::PoisonError::into_inner).take() {
             b.finish_and_clear();
         }
+        let val = if l.val.cases == 0 {
+            "no validation objects".to_string()
+        } else {
+            format!(
+                "val Chamfer-L1 net {:.4} (fine {:.4}) vs identity {:.4}, {} cases",
+                l.val.net.l1, l.val.net_fine.l1, l.val.identity.l1, l.val.cases
+            )
+        };
         eprintln!(
-            "epoch {} (lr {:.2e}): train loss {:.4} | val Chamfer-L1 net {:.4} (fine {:.4}) vs identity {:.4}, {} cases | {:.0} s, {:.2} samples/s",
-            l.epoch, l.lr, l.train_loss, l.val.net.l1, l.val.net_fine.l1, l.val.identity.l1, l.val.cases,
-            l.seconds, l.samples_per_s
+            "epoch {} (lr {:.2e}): train loss {:.4} | {val} | {:.0} s, {:.2} samples/s",
+            l.epoch, l.lr, l.train_loss, l.seconds, l.samples_per_s
         );
     }
 }
@@ -546,13 +553,20 @@ fn train_completion(a: TrainArgs) -> Result<()> {
     })?;
     let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
     let val = &sidecar["validation"]["all"];
-    let mut line = format!(
-        "learn train completion: best epoch {} (validation Chamfer-L1 net {:.4} vs identity {:.4}, {} cases)",
-        sidecar["best_epoch"],
-        f(&val["net"]["l1"]),
-        f(&val["identity"]["l1"]),
-        val["cases"]
-    );
+    let mut line = if val["cases"].as_u64().unwrap_or(0) == 0 {
+        format!(
+            "learn train completion: best epoch {} (the last: no validation objects)",
+            sidecar["best_epoch"]
+        )
+    } else {
+        format!(
+            "learn train completion: best epoch {} (validation Chamfer-L1 net {:.4} vs identity {:.4}, {} cases)",
+            sidecar["best_epoch"],
+            f(&val["net"]["l1"]),
+            f(&val["identity"]["l1"]),
+            val["cases"]
+        )
+    };
     if !sidecar["heldout"].is_null() {
         let h = &sidecar["heldout"]["chamfer_l1"]["all"];
         line += &format!(

@@ -29,8 +29,10 @@ use serde_json::{json, Value};
 use crate::completion_net::{CompletionNet, CompletionShape};
 use crate::completion_train::load_completion_weights_bytes;
 
-/// The shipped completion weights (safetensors) and their sidecar, when this build has them.
-pub const BUILTIN: Option<(&[u8], &str)> = None;
+/// The shipped completion weights (safetensors).
+pub const BUILTIN_WEIGHTS: &[u8] = include_bytes!("../../../data/weights/completion.safetensors");
+/// The sidecar of [`BUILTIN_WEIGHTS`].
+pub const BUILTIN_SIDECAR: &str = include_str!("../../../data/weights/completion.json");
 
 /// The learned completion backend.
 pub struct NetCompletion {
@@ -62,14 +64,7 @@ impl NetCompletion {
 
     /// The shipped weights.
     pub fn builtin() -> Result<NetCompletion, String> {
-        match BUILTIN {
-            Some((w, s)) => NetCompletion::from_bytes(w, s, "builtin"),
-            None => {
-                Err("this build has no shipped completion weights (data/weights/completion.safetensors); \
-                         pass completion_weights=FILE"
-                    .into())
-            }
-        }
+        NetCompletion::from_bytes(BUILTIN_WEIGHTS, BUILTIN_SIDECAR, "builtin")
     }
 
     /// A weights file and its sidecar (`W.json` next to `W.safetensors`).
@@ -169,3 +164,35 @@ pub const COMPLETION_MCP_ENTRY: PlannerEntry = PlannerEntry {
 
 /// The hybrid rows that replace `objview-planners`' own (same names, family and mode).
 pub const HYBRID_TABLE: &[PlannerEntry] = &[COMPLETION_NBV_ENTRY, COMPLETION_SCP_ENTRY, COMPLETION_MCP_ENTRY];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use objview_planners::registry::Registry;
+
+    /// Every hybrid row builds its planner with the shipped `net` by default, agrees with the
+    /// planner it builds, builds the same planner from its defaults JSON, and replaces the
+    /// planners crate's row of the same name in place.
+    #[test]
+    fn hybrid_rows_default_to_net_and_replace_the_planners_rows() {
+        for row in HYBRID_TABLE {
+            let p = row.build_default().unwrap();
+            assert_eq!(p.name(), format!("{}[net]", row.name));
+            assert_eq!((p.family(), p.execution_mode()), (row.family, row.mode));
+            assert_eq!(p.params()["completion_bound"], "method");
+            assert_eq!(p.params()["completion_model"]["weights"], "builtin");
+            assert!(!p.needs_ground_truth());
+            let q = (row.build)((row.defaults)()).unwrap();
+            assert_eq!(q.params(), p.params(), "{}", row.name);
+        }
+        let mut r = Registry::from_tables(&[objview_planners::registry::TABLE, crate::TABLE]).unwrap();
+        let names = r.names();
+        r.replace(HYBRID_TABLE).unwrap();
+        assert_eq!(r.names(), names, "same names, same order");
+        assert_eq!(r.by_name("completion-mcp").unwrap().name(), "completion-mcp[net]");
+        let oracle =
+            r.with_params("completion-nbv", &[("completion".into(), serde_json::json!("oracle"))]).unwrap();
+        assert_eq!(oracle.name(), "completion-nbv[oracle]");
+        assert!(oracle.needs_ground_truth() && oracle.params().get("completion_model").is_none());
+    }
+}

@@ -7,8 +7,8 @@
 //! (`lr_step` 20 and `lr_factor` 0.5 by default; the shipped run steps every 5 epochs). The
 //! loss uses `loss_gt_points` (2048) of each
 //! case's ground-truth points, a fresh seeded subset every epoch (the contract's resampling
-//! rule; ChaCha8 of (seed, epoch, case)): the exact nearest-neighbour search of 6144
-//! predictions against the whole 8192-point truth would cost more than the network.
+//! rule; ChaCha8 of (seed, epoch, case)), to keep the loss cheap (training against the whole
+//! truth was not compared).
 //!
 //! Evaluation ([`evaluate_completion`]): per case, the exact Chamfer-L1 ([`chamfer_l1`], f64,
 //! both halves kept) against the **whole** stored ground truth, in the object's frame (the

@@ -9,6 +9,8 @@ use clap::{Parser, Subcommand};
 use indicatif::ProgressBar;
 use objview_dataset::Shard;
 use objview_geom::normalize::Normalization;
+use objview_learn::completion_net::CompletionShape;
+use objview_learn::completion_train::{CompletionEpochLog, CompletionProgress, CompletionTrainSettings};
 use objview_learn::dataset::{DatasetPlan, DatasetSettings, InputSource, Method};
 use objview_learn::mascvp::MascvpShape;
 use objview_learn::mascvp_train::{ScvpEpochLog, ScvpProgress, ScvpTrainSettings};
@@ -18,14 +20,17 @@ use crate::common::{progress, TermProgress};
 
 #[derive(Subcommand)]
 pub enum Command {
-    /// Oracle training data of a pool: per object the tammes-128 visible voxel sets, greedy
-    /// oracle rollouts from every start view, the method's case sampling and each case's 64³
-    /// input grid, as cases/<uid>.npz + manifest.json (resumable, shardable).
+    /// Training data of a pool, as cases/<uid>.npz + manifest.json (resumable, shardable):
+    /// for nbv-net and ma-scvp per object the tammes-128 visible voxel sets, greedy oracle
+    /// rollouts from every start view, the method's case sampling and each case's 64³ input
+    /// grid; for completion per object partial clouds fused from 1-3 rendered tammes-128 views
+    /// (resampled to 2048 points, normalized) and the ground-truth cloud.
     Dataset(DatasetArgs),
     /// Train a learned planner's network on a dataset; writes the weights (.safetensors), a
     /// sidecar JSON (command, data, settings, metrics, version) and per-epoch checkpoints.
     Train(TrainArgs),
-    /// Top-1 agreement of weights with the oracle labels of a dataset.
+    /// Weights on a dataset: top-1 agreement with the oracle labels (nbv-net data), or the
+    /// Chamfer-L1 of net and identity (completion data).
     Eval(EvalArgs),
     /// Benchmarks: dataset generation per object, training throughput, inference per step.
     Bench(BenchArgs),
@@ -112,10 +117,21 @@ pub struct DatasetArgs {
     /// Pool folders, split files (.json) or meshes.
     #[arg(required = true)]
     pub inputs: Vec<PathBuf>,
-    /// The learned method the cases are for: `nbv-net` (whole rollouts, oracle NBV labels) or
-    /// `ma-scvp` (long-tail cases with exact residual set covers).
+    /// The learned method the cases are for: `nbv-net` (whole rollouts, oracle NBV labels),
+    /// `ma-scvp` (long-tail cases with exact residual set covers) or `completion` (partial clouds
+    /// and ground-truth clouds for the hybrids' completion network).
     #[arg(long)]
     pub method: Method,
+    /// completion: partial clouds per object.
+    #[arg(long, default_value_t = 8)]
+    pub partials: usize,
+    /// completion: the most views fused into one partial cloud (the count is uniform in
+    /// 1..=max-views).
+    #[arg(long, default_value_t = 3)]
+    pub max_views: usize,
+    /// completion: ground-truth points per object (resampled from the ground-truth cloud).
+    #[arg(long, default_value_t = 8192)]
+    pub gt_points: usize,
     /// The dataset folder (resumed when it holds an objects file).
     #[arg(long)]
     pub out: PathBuf,
@@ -152,7 +168,7 @@ pub struct DatasetArgs {
 
 #[derive(Parser)]
 pub struct TrainArgs {
-    /// The network: `nbv-net` or `ma-scvp`.
+    /// The network: `nbv-net`, `ma-scvp` or `completion`.
     pub network: String,
     /// The dataset folder of `objview learn dataset`.
     #[arg(long)]
@@ -166,7 +182,7 @@ pub struct TrainArgs {
     /// Batch size.
     #[arg(long, default_value_t = 8)]
     pub batch: usize,
-    /// Adam learning rate (default: 4e-4 for nbv-net, 1e-4 for ma-scvp).
+    /// Adam learning rate (default: 4e-4 for nbv-net, 1e-4 for ma-scvp, 1e-3 for completion).
     #[arg(long)]
     pub lr: Option<f64>,
     /// Seed of initialization, dropout and case order.
@@ -187,12 +203,31 @@ pub struct TrainArgs {
     /// ma-scvp: BCE weight of positive entries.
     #[arg(long, default_value_t = 1.5)]
     pub pos_weight: f64,
-    /// ma-scvp: StepLR step (epochs).
+    /// ma-scvp, completion: StepLR step (epochs).
     #[arg(long, default_value_t = 20)]
     pub lr_step: usize,
-    /// ma-scvp: StepLR factor.
+    /// ma-scvp, completion: StepLR factor.
     #[arg(long, default_value_t = 0.5)]
     pub lr_factor: f64,
+    /// completion: encoder widths e1,e2,e3,G (stage 1 3->e1->e2, stage 2 2*e2->e3->G; default
+    /// 64,128,256,512).
+    #[arg(long, value_delimiter = ',')]
+    pub encoder: Option<Vec<usize>>,
+    /// completion: hidden widths of the coarse decoder (default 512,512).
+    #[arg(long, value_delimiter = ',')]
+    pub coarse_fc: Option<Vec<usize>>,
+    /// completion: hidden width of the folding MLP (default 64).
+    #[arg(long)]
+    pub fold_width: Option<usize>,
+    /// completion: ground-truth points per case in the loss (a fresh seeded subset each epoch).
+    #[arg(long, default_value_t = 2048)]
+    pub loss_gt_points: usize,
+    /// completion: weight of the coarse output's Chamfer-L1 in the loss.
+    #[arg(long, default_value_t = 1.0)]
+    pub coarse_weight: f64,
+    /// completion: weight of the fine output's Chamfer-L1 in the loss.
+    #[arg(long, default_value_t = 1.0)]
+    pub fine_weight: f64,
     /// Fraction of objects held out for validation (by a hash of the uid).
     #[arg(long, default_value_t = 0.1)]
     pub val_fraction: f64,
@@ -211,7 +246,8 @@ pub struct TrainArgs {
     /// only re-select).
     #[arg(long)]
     pub resume: bool,
-    /// nbv-net: a second dataset (other objects) to report top-1 agreement on in the sidecar.
+    /// nbv-net, completion: a second dataset (other objects) to report top-1 agreement
+    /// (nbv-net) or the Chamfer-L1 of net and identity (completion) on in the sidecar.
     #[arg(long)]
     pub heldout: Option<PathBuf>,
 }
@@ -322,6 +358,11 @@ fn dataset(a: DatasetArgs) -> Result<()> {
     settings.annotate.normalize = a.normalize;
     settings.annotate.gt_cloud_dir = a.gt_cloud_dir;
     settings.annotate.cover.time_limit_s = a.time_limit;
+    settings.completion = objview_learn::completion_data::CompletionDataSettings {
+        partials: a.partials,
+        max_views: a.max_views,
+        gt_points: a.gt_points,
+    };
     let plan = DatasetPlan {
         inputs: a.inputs,
         out: a.out.clone(),
@@ -388,7 +429,11 @@ fn train(a: TrainArgs) -> Result<()> {
     match a.network.as_str() {
         "nbv-net" => {}
         "ma-scvp" => return train_mascvp(a),
-        o => bail!("unknown network '{o}' (this version trains: nbv-net, ma-scvp)"),
+        "completion" => return train_completion(a),
+        o => bail!("unknown network '{o}' (this version trains: nbv-net, ma-scvp, completion)"),
+    }
+    if a.encoder.is_some() || a.coarse_fc.is_some() || a.fold_width.is_some() {
+        bail!("--encoder, --coarse-fc and --fold-width are completion options");
     }
     let settings = TrainSettings {
         grid: a.grid,
@@ -441,9 +486,106 @@ impl ScvpProgress for BarProgress {
     }
 }
 
+impl CompletionProgress for BarProgress {
+    fn batch(&self, epoch: usize, done: usize, total: usize, loss: f64) {
+        TrainProgress::batch(self, epoch, done, total, loss);
+    }
+    fn epoch(&self, l: &CompletionEpochLog) {
+        if let Some((_, b)) = self.bar.lock().unwrap_or_else(std::sync::PoisonError::into_inner).take() {
+            b.finish_and_clear();
+        }
+        let val = if l.val.cases == 0 {
+            "no validation objects".to_string()
+        } else {
+            format!(
+                "val Chamfer-L1 net {:.4} (fine {:.4}) vs identity {:.4}, {} cases",
+                l.val.net.l1, l.val.net_fine.l1, l.val.identity.l1, l.val.cases
+            )
+        };
+        eprintln!(
+            "epoch {} (lr {:.2e}): train loss {:.4} | {val} | {:.0} s, {:.2} samples/s",
+            l.epoch, l.lr, l.train_loss, l.seconds, l.samples_per_s
+        );
+    }
+}
+
+fn train_completion(a: TrainArgs) -> Result<()> {
+    let mut shape = CompletionShape::small();
+    if let Some(e) = &a.encoder {
+        let [e1, e2, e3, g] = e[..] else {
+            bail!("--encoder needs four numbers (e1,e2,e3,G), got {e:?}");
+        };
+        shape.encoder = [e1, e2, e3, g];
+    }
+    if let Some(c) = &a.coarse_fc {
+        shape.coarse_fc = c.clone();
+    }
+    if let Some(w) = a.fold_width {
+        shape.fold_width = w;
+    }
+    let settings = CompletionTrainSettings {
+        shape,
+        epochs: a.epochs,
+        batch: a.batch,
+        lr: a.lr.unwrap_or(1e-3),
+        lr_step: a.lr_step,
+        lr_factor: a.lr_factor,
+        loss_gt_points: a.loss_gt_points,
+        coarse_weight: a.coarse_weight,
+        fine_weight: a.fine_weight,
+        seed: a.seed,
+        val_fraction: a.val_fraction,
+        max_cases: a.max_cases,
+    };
+    let command = command_line();
+    let progress = BarProgress { bar: Mutex::new(None) };
+    let sidecar = pool(a.threads)?.install(|| {
+        objview_learn::completion_train::train_completion_and_describe(
+            &a.data,
+            None,
+            &a.out,
+            &settings,
+            a.resume,
+            a.heldout.as_deref(),
+            &command,
+            &progress,
+        )
+    })?;
+    let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+    let val = &sidecar["validation"]["all"];
+    let mut line = if val["cases"].as_u64().unwrap_or(0) == 0 {
+        format!(
+            "learn train completion: best epoch {} (the last: no validation objects)",
+            sidecar["best_epoch"]
+        )
+    } else {
+        format!(
+            "learn train completion: best epoch {} (validation Chamfer-L1 net {:.4} vs identity {:.4}, {} cases)",
+            sidecar["best_epoch"],
+            f(&val["net"]["l1"]),
+            f(&val["identity"]["l1"]),
+            val["cases"]
+        )
+    };
+    if !sidecar["heldout"].is_null() {
+        let h = &sidecar["heldout"]["chamfer_l1"]["all"];
+        line += &format!(
+            "; held-out net {:.4} vs identity {:.4} ({} cases)",
+            f(&h["net"]["l1"]),
+            f(&h["identity"]["l1"]),
+            h["cases"]
+        );
+    }
+    println!("{line} -> {} (+ {})", a.out.display(), objview_learn::train::sidecar_path(&a.out).display());
+    Ok(())
+}
+
 fn train_mascvp(a: TrainArgs) -> Result<()> {
     if a.heldout.is_some() {
-        bail!("--heldout is an nbv-net option (ma-scvp reports validation F1 and a baseline)");
+        bail!("--heldout is an nbv-net and completion option (ma-scvp reports validation F1 and a baseline)");
+    }
+    if a.encoder.is_some() || a.coarse_fc.is_some() || a.fold_width.is_some() {
+        bail!("--encoder, --coarse-fc and --fold-width are completion options");
     }
     let [conv1, b1, b2, b3] = a.widths[..] else {
         bail!("--widths needs four numbers (conv1 and the three blocks), got {:?}", a.widths);
@@ -482,7 +624,12 @@ fn train_mascvp(a: TrainArgs) -> Result<()> {
 }
 
 fn eval(a: EvalArgs) -> Result<()> {
-    let r = objview_learn::train::eval_weights(&a.weights, &a.data)?;
+    let manifest = objview_learn::train::read_manifest(&a.data)?;
+    let r = if manifest["method"] == "completion" {
+        objview_learn::completion_train::eval_completion_weights(&a.weights, &a.data)?
+    } else {
+        objview_learn::train::eval_weights(&a.weights, &a.data)?
+    };
     println!("{}", serde_json::to_string_pretty(&r)?);
     Ok(())
 }
@@ -507,9 +654,13 @@ pub struct BenchArgs {
     /// Skip the dataset-generation measurement.
     #[arg(long)]
     pub skip_dataset: bool,
-    /// Which networks: `nbv-net`, `ma-scvp` or `all`.
+    /// Which networks: `nbv-net`, `ma-scvp`, `completion` or `all`.
     #[arg(long, default_value = "all")]
     pub network: String,
+    /// completion: weights of the timed completion calls (`builtin` or a .safetensors with its
+    /// sidecar).
+    #[arg(long, default_value = "builtin")]
+    pub completion_weights: String,
     /// MA-SCVP: timed training batches (batch 2) of the reference shape (64³, 34 M parameters;
     /// tens of seconds each on this machine); 0 skips it.
     #[arg(long, default_value_t = 1)]
@@ -523,12 +674,16 @@ fn ms(s: &objview_runs::bench::Spread) -> String {
 fn bench(a: BenchArgs) -> Result<()> {
     use objview_learn::bench::*;
     println!("learn bench: {} at ~{} triangles", a.object, a.triangles);
-    let (nbv, scvp) = match a.network.as_str() {
-        "all" => (true, true),
-        "nbv-net" => (true, false),
-        "ma-scvp" => (false, true),
-        o => bail!("--network: unknown network '{o}' (expected nbv-net, ma-scvp or all)"),
+    let (nbv, scvp, completion) = match a.network.as_str() {
+        "all" => (true, true, true),
+        "nbv-net" => (true, false, false),
+        "ma-scvp" => (false, true, false),
+        "completion" => (false, false, true),
+        o => bail!("--network: unknown network '{o}' (expected nbv-net, ma-scvp, completion or all)"),
     };
+    if completion {
+        bench_completion(&a)?;
+    }
     if scvp {
         bench_mascvp(&a)?;
     }
@@ -572,6 +727,40 @@ fn bench(a: BenchArgs) -> Result<()> {
             ms(&n)
         );
     }
+    Ok(())
+}
+
+fn bench_completion(a: &BenchArgs) -> Result<()> {
+    use objview_learn::bench::*;
+    let mut backend = objview_learn::completion_backend::NetCompletion::named(&a.completion_weights)
+        .map_err(anyhow::Error::msg)
+        .context("--completion-weights")?;
+    let shape: CompletionShape = serde_json::from_value(
+        objview_planners::hybrid::completion::Completion::describe(&backend)["shape"].clone(),
+    )?;
+    let mut line = format!(
+        "completion training, shape of the {} weights ({} parameters), batch 8:",
+        a.completion_weights,
+        shape.params()
+    );
+    let mut one = 0.0;
+    for threads in [1usize, 2] {
+        let s = pool(Some(threads))?.install(|| completion_training_throughput(&shape, 8, a.batches));
+        if threads == 1 {
+            one = s.median;
+        }
+        line += &format!(" {threads} thread(s) median {:.2} samples/s (x{:.2});", s.median, s.median / one);
+    }
+    println!("{line}");
+    let (s, points) =
+        pool(Some(1))?.install(|| completion_call(&mut backend, &a.object, a.triangles, a.steps))?;
+    println!(
+        "completion call (net, {} weights), 1 thread, {} partial clouds of 2 views (mean {:.0} points): {} (resample to 2048, normalize, network, map back)",
+        a.completion_weights,
+        a.steps.clamp(1, 128),
+        points,
+        ms(&s)
+    );
     Ok(())
 }
 

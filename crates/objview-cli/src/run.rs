@@ -102,13 +102,18 @@ pub struct Args {
     pub token: Option<String>,
 }
 
-/// The planners this binary offers: the tables of every planner crate it links (today the
-/// classical planners of `objview-planners`).
+/// The planners this binary offers: the tables of every planner crate it links (the classical
+/// and hybrid planners of `objview-planners`, the learned ones of `objview-learn`), with the
+/// hybrid rows replaced by `objview-learn`'s, which can build the `net` completion backend and
+/// default to it.
 pub fn registry() -> &'static Registry {
     static REGISTRY: OnceLock<Registry> = OnceLock::new();
     REGISTRY.get_or_init(|| {
-        Registry::from_tables(&[objview_planners::registry::TABLE, objview_learn::TABLE])
-            .expect("planner names are unique")
+        let mut r = Registry::from_tables(&[objview_planners::registry::TABLE, objview_learn::TABLE])
+            .expect("planner names are unique");
+        r.replace(objview_learn::completion_backend::HYBRID_TABLE)
+            .expect("objview-learn's hybrid rows replace objview-planners' own");
+        r
     })
 }
 

@@ -61,8 +61,32 @@ fn demo_runs_every_stage_and_resumes() {
             "{f}"
         );
     }
+    // The hybrids run with their default completion, the shipped `net`, named in the method.
+    for (f, method) in [
+        ("completion-scp_whole_auto", "completion-scp[net]"),
+        ("completion-mcp_whole_5", "completion-mcp[net]"),
+        ("completion-nbv_whole_auto", "completion-nbv[net]"),
+    ] {
+        let text = std::fs::read_to_string(out.join(format!("episodes/{f}.jsonl"))).unwrap();
+        let eps: Vec<Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        assert!(!eps.is_empty(), "{f}");
+        for e in &eps {
+            assert!(e.get("error").is_none(), "{f}: {e}");
+            assert_eq!(e["method"], method, "{f}");
+            assert_eq!(e["settings"]["planner_params"]["completion_model"]["weights"], "builtin", "{f}");
+        }
+    }
     let md = std::fs::read_to_string(out.join("report/report.md")).unwrap();
-    for t in ["Table 2", "Table 3", "Table 4", "Table 5", "rse-mov", "random-tsp", "nbv-net"] {
+    for t in [
+        "Table 2",
+        "Table 3",
+        "Table 4",
+        "Table 5",
+        "rse-mov",
+        "random-tsp",
+        "nbv-net",
+        "completion-scp[net]",
+    ] {
         assert!(md.contains(t), "report lacks {t}");
     }
     let episodes = std::fs::read_to_string(out.join("episodes/rse_whole_auto.jsonl")).unwrap();

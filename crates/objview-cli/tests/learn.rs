@@ -244,6 +244,138 @@ fn mascvp_dataset_train_and_run() {
     assert!(["plan_end", "candidate_exhausted"].contains(&reason), "{reason}");
 }
 
+/// `learn dataset --method completion`, `learn train completion` (a tiny network, one epoch),
+/// `learn eval` on completion data, and `run --planner completion-scp --param completion=net`
+/// with those weights; the planner's default backend is `net` (the shipped weights).
+#[test]
+fn completion_dataset_train_eval_and_run() {
+    let dir = tempdir();
+    let pool = dir.path().join("pool");
+    objview_ok(&["objects", "synth", "--count", "2", "--seed", "4", "--out", s(&pool)]);
+    let data = dir.path().join("data");
+    let out = objview_ok(&[
+        "learn",
+        "dataset",
+        s(&pool),
+        "--method",
+        "completion",
+        "--partials",
+        "3",
+        "--gt-points",
+        "1024",
+        "--out",
+        s(&data),
+        "--threads",
+        "2",
+    ]);
+    assert!(out.contains("2 done, 0 failed"), "{out}");
+    let m: Value =
+        serde_json::from_str(&std::fs::read_to_string(data.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!((m["method"].as_str(), m["cases"].as_u64()), (Some("completion"), Some(6)));
+    assert_eq!(m["settings"]["gt_points"], 1024);
+    let w = dir.path().join("c.safetensors");
+    let out = objview_ok(&[
+        "learn",
+        "train",
+        "completion",
+        "--data",
+        s(&data),
+        "--out",
+        s(&w),
+        "--epochs",
+        "1",
+        "--encoder",
+        "8,8,8,8",
+        "--coarse-fc",
+        "16",
+        "--fold-width",
+        "8",
+        "--loss-gt-points",
+        "256",
+        "--val-fraction",
+        "0",
+        "--seed",
+        "3",
+    ]);
+    assert!(out.contains("learn train completion: best epoch 1"), "{out}");
+    let side: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("c.json")).unwrap()).unwrap();
+    assert_eq!(side["network"], "completion");
+    assert_eq!(side["settings"]["shape"]["encoder"], serde_json::json!([8, 8, 8, 8]));
+    assert_eq!(side["settings"]["lr"], 1e-3, "the completion default learning rate");
+    assert!(side["deviation"].as_str().unwrap().contains("PoinTr"));
+    assert!(side["data"]["dataset_command"].as_str().unwrap().contains("--method completion"));
+    let err = objview_err(&[
+        "learn",
+        "train",
+        "completion",
+        "--data",
+        s(&data),
+        "--out",
+        s(&w),
+        "--encoder",
+        "8,8",
+    ]);
+    assert!(err.contains("--encoder needs four numbers"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    let err =
+        objview_err(&["learn", "train", "nbv-net", "--data", s(&data), "--out", s(&w), "--fold-width", "8"]);
+    assert!(err.contains("completion options"), "{err}");
+
+    let eval: Value =
+        serde_json::from_str(&objview_ok(&["learn", "eval", s(&w), "--data", s(&data)])).unwrap();
+    assert_eq!(eval["cases"], 6);
+    let all = &eval["chamfer_l1"]["all"];
+    assert!(all["net"]["l1"].as_f64().unwrap() > 0.0 && all["identity"]["l1"].as_f64().unwrap() > 0.0);
+    assert!(eval["beats_identity"].is_boolean());
+
+    for (params, method) in [
+        (
+            vec!["completion=net".to_string(), format!("completion_weights={}", w.display())],
+            "completion-scp[net]",
+        ),
+        (vec![], "completion-scp[net]"),
+        (vec!["completion=identity".to_string()], "completion-scp[identity]"),
+    ] {
+        let res = dir.path().join(format!("r-{}.jsonl", params.len()));
+        let mut args =
+            vec!["run", "--planner", "completion-scp", "--objects", s(&pool), "--out", s(&res), "--quiet"];
+        for p in &params {
+            args.extend(["--param", p.as_str()]);
+        }
+        objview_ok(&args);
+        let lines: Vec<Value> = std::fs::read_to_string(&res)
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        assert_eq!(lines.len(), 2);
+        for l in &lines {
+            assert_eq!(l["method"], method, "{params:?}");
+            assert_eq!(l["family"], "hybrid");
+            let model = &l["settings"]["planner_params"]["completion_model"];
+            if method.ends_with("[net]") {
+                let want = if params.is_empty() { "builtin".to_string() } else { w.display().to_string() };
+                assert_eq!(model["weights"], want.as_str(), "{}", l["settings"]);
+            } else {
+                assert!(model.is_null());
+            }
+        }
+    }
+    let err = objview_err(&[
+        "run",
+        "--planner",
+        "completion-nbv",
+        "--param",
+        "completion_weights=/nonexistent.safetensors",
+        "--objects",
+        s(&pool),
+        "--out",
+        s(&dir.path().join("bad.jsonl")),
+    ]);
+    assert!(err.contains("/nonexistent.safetensors"), "{err}");
+}
+
 /// `learn experiment difficulty-aware` end to end on a small annotated pool (tiny network, one
 /// epoch): the splits (equal subset sizes, analysis objects in neither subset), per-object VC
 /// lines over 128 starts, the summary and Figure 4; a re-run resumes every stage; other

@@ -2,7 +2,8 @@
 //! per object, training throughput (samples/s at 32³ and 64³, on 1 and 2 threads) and the
 //! planner's cost per step (grid update + network) at 32³ and 64³; for MA-SCVP the training
 //! throughput of the scaled and the reference shape and the one-shot planning step (grid +
-//! network + decode + TSP).
+//! network + decode + TSP); for the completion network the training throughput and the cost of
+//! one completion call (the contract's resampling, normalization, network and mapping back).
 //!
 //! Objects are built-in procedural objects at a chosen triangle count, written to a temporary
 //! folder, so the figures are reproducible on any machine.
@@ -200,4 +201,77 @@ pub fn mascvp_plan_step(
     }
     let mean = sizes.iter().sum::<f64>() / sizes.len() as f64;
     Ok(([Spread::of(a), Spread::of(b), Spread::of(c), Spread::of(d)], mean))
+}
+
+/// Completion-network training samples per second of `shape` with batch `batch` over `batches`
+/// timed batches (after one warm-up batch), on random clouds (2048 input, 2048 loss ground-truth
+/// points, the loss of training: coarse + fine Chamfer-L1); the spread is of per-batch samples/s.
+pub fn completion_training_throughput(
+    shape: &crate::completion_net::CompletionShape,
+    batch: usize,
+    batches: usize,
+) -> Spread {
+    use crate::completion_net::{chamfer_loss, CompletionNet};
+    use objview_planners::hybrid::completion::INPUT_POINTS;
+    let base = Device::flex();
+    base.seed(1);
+    let device = base.autodiff();
+    let mut net = CompletionNet::new(shape, &device);
+    let mut optim = AdamConfig::new().with_epsilon(1e-8).init();
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let mut rates = Vec::new();
+    for i in 0..=batches {
+        let x: Vec<f32> = (0..batch * INPUT_POINTS * 3).map(|_| rng.gen_range(-1.0..1.0)).collect();
+        let truth: Vec<Vec<f32>> =
+            (0..batch).map(|_| (0..2048 * 3).map(|_| rng.gen_range(-1.0..1.0)).collect()).collect();
+        let t = Instant::now();
+        let x = burn::tensor::Tensor::<3>::from_data(TensorData::new(x, [batch, INPUT_POINTS, 3]), &device);
+        let (coarse, fine) = net.forward(x);
+        let loss = chamfer_loss(coarse, &truth) + chamfer_loss(fine, &truth);
+        let grads = GradientsParams::from_grads(loss.backward(), &net);
+        net = optim.step(5e-4, net, grads);
+        if i > 0 {
+            rates.push(batch as f64 / t.elapsed().as_secs_f64());
+        }
+    }
+    let _ = net.valid();
+    Spread::of(rates)
+}
+
+/// Seconds per completion call of `backend` as the hybrid planners make it
+/// ([`objview_planners::hybrid::completion::complete`]: resampling to 2048, normalization, the
+/// backend, mapping back, appending the input) on the partial clouds of built-in `name`: for
+/// each of `calls` tammes-128 start views, the fused cloud of the start view and its farthest
+/// view (what `completion-scp` completes), made before the clock starts. Returns the spread and
+/// the mean partial-cloud size.
+pub fn completion_call(
+    backend: &mut dyn objview_planners::hybrid::completion::Completion,
+    name: &str,
+    triangles: usize,
+    calls: usize,
+) -> Result<(Spread, f64), LearnError> {
+    use objview_planners::hybrid::completion::complete;
+    let mesh = objview_geom::synth::build_with_triangles(name, triangles);
+    let cameras: Vec<Camera> = GridViews::new(objview_geom::pose::VIEW_RADIUS)?.planning().to_vec();
+    let n = calls.clamp(1, cameras.len());
+    let mut frames = std::collections::BTreeMap::new();
+    let (mut secs, mut sizes) = (vec![], vec![]);
+    for k in 0..n {
+        let s = k * cameras.len() / n;
+        let far = (0..cameras.len())
+            .max_by(|&a, &b| {
+                let d = |v: usize| objview_episode::path::pose_distance(&cameras[s].pose, &cameras[v].pose);
+                d(a).total_cmp(&d(b)).then(b.cmp(&a))
+            })
+            .expect("128 views");
+        let partial = crate::completion_data::fused_partial(&mesh, &cameras, &[s, far], &mut frames);
+        sizes.push(partial.len() as f64);
+        let mut rng = ChaCha8Rng::seed_from_u64(k as u64);
+        let t = Instant::now();
+        let out = complete(backend, &partial, &mut rng).map_err(|e| LearnError::Invalid(e.to_string()))?;
+        secs.push(t.elapsed().as_secs_f64());
+        assert_eq!(out.points.len(), out.predicted + 2048);
+    }
+    let mean = sizes.iter().sum::<f64>() / sizes.len() as f64;
+    Ok((Spread::of(secs), mean))
 }

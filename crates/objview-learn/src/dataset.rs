@@ -1,5 +1,7 @@
 //! `objview learn dataset`: oracle training data for the learned planners, one NPZ file per
-//! object plus a JSON manifest, resumable and shardable like `annotate`.
+//! object plus a JSON manifest, resumable and shardable like `annotate`. `--method completion`
+//! writes the completion network's pairs instead ([`crate::completion_data`], same layout);
+//! what follows is the data of `nbv-net` and `ma-scvp`.
 //!
 //! Per object (timed by stage):
 //! 1. `load`: the normalized mesh and its ground-truth cloud, exactly as `annotate` reads them;
@@ -63,6 +65,10 @@ pub enum Method {
     /// MA-SCVP: long-tail protocol, residual set-cover labels.
     #[serde(rename = "ma-scvp")]
     MaScvp,
+    /// The completion network of the hybrids' `net` backend: partial clouds of 1–3 views and
+    /// the ground-truth cloud ([`crate::completion_data`]).
+    #[serde(rename = "completion")]
+    Completion,
 }
 
 impl Method {
@@ -71,13 +77,15 @@ impl Method {
         match self {
             Method::NbvNet => "nbv-net",
             Method::MaScvp => "ma-scvp",
+            Method::Completion => "completion",
         }
     }
-    /// Its case protocol.
-    pub fn protocol(self) -> Protocol {
+    /// Its case protocol (`None` for completion data, which has no rollouts).
+    pub fn protocol(self) -> Option<Protocol> {
         match self {
-            Method::NbvNet => Protocol::Nbv,
-            Method::MaScvp => Protocol::LongTail,
+            Method::NbvNet => Some(Protocol::Nbv),
+            Method::MaScvp => Some(Protocol::LongTail),
+            Method::Completion => None,
         }
     }
 }
@@ -88,7 +96,8 @@ impl std::str::FromStr for Method {
         match s {
             "nbv-net" => Ok(Method::NbvNet),
             "ma-scvp" => Ok(Method::MaScvp),
-            o => Err(format!("unknown method '{o}' (expected nbv-net or ma-scvp)")),
+            "completion" => Ok(Method::Completion),
+            o => Err(format!("unknown method '{o}' (expected nbv-net, ma-scvp or completion)")),
         }
     }
 }
@@ -140,6 +149,8 @@ pub struct DatasetSettings {
     pub need_case_1: usize,
     /// Seed of the case sampling.
     pub seed: u64,
+    /// Completion data: partial clouds per object, views per partial, ground-truth size.
+    pub completion: crate::completion_data::CompletionDataSettings,
 }
 
 impl Default for DatasetSettings {
@@ -153,6 +164,7 @@ impl Default for DatasetSettings {
             grid: GRID,
             need_case_1: NEED_CASE_1,
             seed: 0,
+            completion: Default::default(),
         }
     }
 }
@@ -160,9 +172,12 @@ impl Default for DatasetSettings {
 impl DatasetSettings {
     /// The settings as recorded.
     pub fn to_json(&self) -> Value {
+        if self.method == Method::Completion {
+            return crate::completion_data::settings_json(self);
+        }
         json!({
             "method": self.method.name(),
-            "protocol": match self.method.protocol() { Protocol::Nbv => "nbv (whole rollouts)", Protocol::LongTail => "long-tail" },
+            "protocol": match self.method.protocol() { Some(Protocol::Nbv) => "nbv (whole rollouts)", _ => "long-tail" },
             "views": format!("tammes-{VIEWS}"),
             "input": self.input.name(),
             "grid": self.grid,
@@ -184,6 +199,9 @@ impl DatasetSettings {
         }
         if self.need_case_1 == 0 {
             return Err(LearnError::Invalid("--need-case-1 must be at least 1".into()));
+        }
+        if self.method == Method::Completion {
+            self.completion.validate()?;
         }
         Ok(())
     }
@@ -286,12 +304,10 @@ pub fn generate_object(
         if complete.is_empty() { 0.0 } else { complete.iter().sum::<usize>() as f64 / complete.len() as f64 };
     lap("rollouts", &mut t);
 
-    let kept = sample(
-        &rollouts,
-        settings.method.protocol(),
-        settings.need_case_1,
-        object_seed(settings.seed, &obj.uid),
-    );
+    let protocol = settings.method.protocol().ok_or_else(|| {
+        LearnError::Invalid(format!("method {} has no case protocol", settings.method.name()))
+    })?;
+    let kept = sample(&rollouts, protocol, settings.need_case_1, object_seed(settings.seed, &obj.uid));
     lap("sampling", &mut t);
 
     let n = kept.len();
@@ -451,17 +467,20 @@ impl DatasetPlan {
         let summary = drive(
             "learn dataset",
             Some(format!("shard {}", self.shard)),
-            Some(format!("{} cases, {}³ grids", self.settings.method.name(), self.settings.grid)),
+            Some(if self.settings.method == Method::Completion {
+                format!(
+                    "completion pairs, {} partial clouds of 1-{} views per object",
+                    self.settings.completion.partials, self.settings.completion.max_views
+                )
+            } else {
+                format!("{} cases, {}³ grids", self.settings.method.name(), self.settings.grid)
+            }),
             &objects,
             out,
             &existing,
             self.threads,
-            |obj| match generate_object(obj, &self.settings, &cameras, &self.out, &settings_json) {
-                Ok(rec) => ItemOutcome {
-                    note: format!("{} cases, |U|={}, {:.2} s", rec.cases, rec.universe, rec.seconds),
-                    line: to_line(&rec),
-                    failed: false,
-                },
+            |obj| match self.generate(obj, &cameras, &settings_json) {
+                Ok((line, note)) => ItemOutcome { note, line, failed: false },
                 Err(e) => {
                     let msg = objview_geom::error::one_line(&e.to_string()).into_owned();
                     ItemOutcome {
@@ -477,6 +496,34 @@ impl DatasetPlan {
         )?;
         let manifest = write_manifest(&self.out, &settings_json, &self.command)?;
         Ok((summary, manifest))
+    }
+}
+
+impl DatasetPlan {
+    /// One object of the method: its objects-file line and a progress note.
+    fn generate(
+        &self,
+        obj: &ObjectRef,
+        cameras: &[Camera],
+        settings_json: &Value,
+    ) -> Result<(String, String), LearnError> {
+        if self.settings.method == Method::Completion {
+            let rec = crate::completion_data::generate_completion_object(
+                obj,
+                &self.settings,
+                cameras,
+                &self.out,
+                settings_json,
+            )?;
+            let note = format!(
+                "{} partial clouds (mean {:.0} points), {:.2} s",
+                rec.cases, rec.mean_partial_points, rec.seconds
+            );
+            return Ok((to_line(&rec), note));
+        }
+        let rec = generate_object(obj, &self.settings, cameras, &self.out, settings_json)?;
+        let note = format!("{} cases, |U|={}, {:.2} s", rec.cases, rec.universe, rec.seconds);
+        Ok((to_line(&rec), note))
     }
 }
 
@@ -527,12 +574,16 @@ pub fn write_manifest(dir: &Path, settings_json: &Value, command: &str) -> Resul
         "cases": cases,
         "files": files,
         "objects_files": names.iter().filter_map(|p| p.file_name().map(|n| n.to_string_lossy().to_string())).collect::<Vec<_>>(),
-        "arrays": {
-            "grid": "float32 [n, G, G, G], occupancy probability, C order [x][y][z], box [-1,1]^3, 0.5 unknown",
-            "visited": "uint8 [n, 128]", "label": "int64 [n] oracle next-best view",
-            "gains": "int32 [n, 128]", "cover": "uint8 [n, 128] residual set cover (multi-hot)",
-            "cover_status": "int8 [n]: -1 not computed, 0 optimal, 1 time limit, 2 error",
-            "start": "int32 [n]", "step": "int32 [n]", "covered": "int32 [n]", "universe": "int32 []"
+        "arrays": if settings_json["method"] == "completion" {
+            crate::completion_data::arrays_json()
+        } else {
+            json!({
+                "grid": "float32 [n, G, G, G], occupancy probability, C order [x][y][z], box [-1,1]^3, 0.5 unknown",
+                "visited": "uint8 [n, 128]", "label": "int64 [n] oracle next-best view",
+                "gains": "int32 [n, 128]", "cover": "uint8 [n, 128] residual set cover (multi-hot)",
+                "cover_status": "int8 [n]: -1 not computed, 0 optimal, 1 time limit, 2 error",
+                "start": "int32 [n]", "step": "int32 [n]", "covered": "int32 [n]", "universe": "int32 []"
+            })
         },
         "command": command,
         "settings": settings_json,

@@ -10,9 +10,19 @@
 //! Data flow: pool → `learn dataset` (NPZ + manifest) → `learn train` (weights + sidecar JSON)
 //! → planners `nbv-net` and `ma-scvp` (`weights=FILE`, default the shipped
 //! `data/weights/{nbv-net,ma-scvp}.*`).
+//!
+//! The hybrid planners' learned completion backend `net` lives here too (it needs Burn):
+//! `learn dataset --method completion` ([`completion_data`]) → `learn train completion`
+//! ([`completion_train`], the network of [`completion_net`]) → [`completion_backend`], whose
+//! [`completion_backend::HYBRID_TABLE`] rows replace `objview-planners`' hybrid rows in the CLI
+//! (`completion=net`, `completion_weights=FILE`).
 
 pub mod bench;
 pub mod checkpoint;
+pub mod completion_backend;
+pub mod completion_data;
+pub mod completion_net;
+pub mod completion_train;
 pub mod dataset;
 pub mod experiment;
 pub mod input_grid;

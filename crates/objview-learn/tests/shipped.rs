@@ -1,7 +1,7 @@
-//! The shipped NBV-Net weights: they load, their sidecar records what produced them, and
+//! The shipped weights. NBV-Net: they load, their sidecar records what produced them, and
 //! their top-1 agreement with the oracle labels of the fixed held-out set (eight built-in
 //! objects, regenerated here with the dataset command's settings) is exactly what the sidecar
-//! says.
+//! says. MA-SCVP and the completion network: below.
 
 use objview_dataset::{Shard, Silent};
 use objview_learn::dataset::{DatasetPlan, DatasetSettings, Method};
@@ -82,4 +82,81 @@ fn shipped_mascvp_weights_load_and_match_their_sidecar() {
     let logits = scorer.logits(&grid, &visited);
     assert_eq!(logits.len(), 128);
     assert!(logits.iter().all(|x| x.is_finite()));
+}
+
+/// The shipped completion weights: they load into the shape their sidecar records (the default
+/// shape), their hash and parameter count are the sidecar's, the sidecar records the commands,
+/// the data, the deviation from PoinTr, the kept epoch, the held-out Chamfer-L1 of `net` and
+/// `identity` per d_plan bucket and whether `net` beats `identity`; the backend completes a
+/// built-in object's partial cloud with 6144 finite predicted points, and `learn eval builtin`
+/// works on a regenerated completion dataset.
+#[test]
+fn shipped_completion_weights_load_and_match_their_sidecar() {
+    use objview_learn::completion_backend::{NetCompletion, BUILTIN_SIDECAR, BUILTIN_WEIGHTS};
+    use objview_learn::completion_net::CompletionShape;
+    use objview_planners::hybrid::completion::{complete, NET_PREDICTED_POINTS};
+    let side: Value = serde_json::from_str(BUILTIN_SIDECAR).unwrap();
+    for key in
+        ["command", "data", "settings", "history", "final", "validation", "heldout", "deviation", "version"]
+    {
+        assert!(!side[key].is_null(), "sidecar field {key}");
+    }
+    assert!(side["command"].as_str().unwrap().contains("learn train completion"));
+    assert!(side["data"]["dataset_command"].as_str().unwrap().contains("--method completion"));
+    assert!(side["heldout"]["dataset_command"].as_str().unwrap().contains("--method completion"));
+    assert_eq!(side["data"]["method"], "completion");
+    let shape: CompletionShape = serde_json::from_value(side["settings"]["shape"].clone()).unwrap();
+    assert_eq!(shape, CompletionShape::small(), "the shipped weights are the default shape");
+    assert_eq!(side["deviation"].as_str().unwrap(), shape.deviation());
+    assert_eq!(side["params"].as_u64().unwrap() as usize, shape.params());
+    assert_eq!(
+        side["weights_fnv1a64"].as_str().unwrap(),
+        format!("{:016x}", objview_geom::hash::fnv1a64(BUILTIN_WEIGHTS))
+    );
+    let best = side["best_epoch"].as_u64().unwrap() as usize;
+    assert_eq!(side["final"]["val"], side["history"][best - 1]["val"], "final = the kept epoch");
+    // The held-out figures: both methods, every bucket, and the verdict agrees with them.
+    let h = &side["heldout"]["chamfer_l1"];
+    let (net, identity) =
+        (h["all"]["net"]["l1"].as_f64().unwrap(), h["all"]["identity"]["l1"].as_f64().unwrap());
+    assert_eq!(side["heldout"]["beats_identity"], net < identity);
+    assert_eq!(side["beats_identity"]["heldout"], net < identity);
+    let buckets = h["buckets"].as_object().unwrap();
+    assert!(!buckets.is_empty());
+    let cases: u64 = buckets.values().map(|b| b["cases"].as_u64().unwrap()).sum();
+    assert_eq!(cases, h["all"]["cases"].as_u64().unwrap(), "buckets partition the held-out cases");
+
+    let mut backend = NetCompletion::builtin().expect("the shipped weights load");
+    let mesh = objview_geom::synth::build_with_triangles("mug", 5000);
+    let cams = objview_dataset::annotate::GridViews::new(3.0).unwrap().planning().to_vec();
+    let partial =
+        objview_learn::completion_data::fused_partial(&mesh, &cams, &[0, 64], &mut Default::default());
+    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(0);
+    let out = complete(&mut backend, &partial, &mut rng).unwrap();
+    assert_eq!(out.predicted, NET_PREDICTED_POINTS);
+    assert!(out.points.iter().all(|p| p.iter().all(|x| x.is_finite())));
+
+    let dir = tempfile::tempdir().unwrap();
+    objview_geom::synth::write_pool(&dir.path().join("builtins")).unwrap();
+    let data = dir.path().join("c");
+    let plan = DatasetPlan {
+        inputs: ["mug", "vase"]
+            .iter()
+            .map(|n| dir.path().join("builtins").join(format!("{n}.obj")))
+            .collect(),
+        out: data.clone(),
+        settings: DatasetSettings { method: Method::Completion, ..Default::default() },
+        threads: Some(2),
+        shard: Shard::ALL,
+        retry_failed: false,
+        command: "test".into(),
+    };
+    plan.run(&Silent).unwrap();
+    let e = objview_learn::completion_train::eval_completion_weights("builtin", &data).unwrap();
+    assert_eq!(e["cases"], 16);
+    let all = &e["chamfer_l1"]["all"];
+    for k in ["net", "net_fine", "identity"] {
+        let v = all[k]["l1"].as_f64().unwrap();
+        assert!(v.is_finite() && v > 0.0, "{k}: {v}");
+    }
 }

@@ -203,6 +203,32 @@ impl Registry {
         Ok(())
     }
 
+    /// Replaces rows by name with those of `table`, each in the place of the row it replaces
+    /// (a crate that can build more of a planner than its own crate can — `objview-learn`'s
+    /// hybrid rows, which add the `net` completion backend — supersedes those rows this way).
+    /// An error (and nothing replaced) when a row of `table` names no registered planner, when
+    /// its family or mode differ from the replaced row's, or when a name occurs twice in it.
+    pub fn replace(&mut self, table: &[PlannerEntry]) -> Result<(), String> {
+        let mut at = Vec::with_capacity(table.len());
+        for (i, row) in table.iter().enumerate() {
+            if table[..i].iter().any(|e| e.name == row.name) {
+                return Err(format!("planner {:?} is replaced twice", row.name));
+            }
+            let k = self.entries.iter().position(|e| e.name == row.name).ok_or_else(|| {
+                format!("planner {:?} is not registered, so it cannot be replaced", row.name)
+            })?;
+            let old = &self.entries[k];
+            if old.family != row.family || old.mode != row.mode {
+                return Err(format!("planner {:?}: a replacement must keep its family and mode", row.name));
+            }
+            at.push(k);
+        }
+        for (k, row) in at.into_iter().zip(table) {
+            self.entries[k] = *row;
+        }
+        Ok(())
+    }
+
     /// All rows, in registration order.
     pub fn entries(&self) -> &[PlannerEntry] {
         &self.entries
@@ -435,6 +461,34 @@ mod tests {
         let mut r = Registry::builtin();
         assert!(r.add(TABLE).is_err());
         assert_eq!(r.entries().len(), TABLE.len(), "a failed add adds nothing");
+    }
+
+    #[test]
+    fn rows_are_replaced_in_place_by_name() {
+        const ECHO_RSE: &[PlannerEntry] = &[PlannerEntry {
+            name: "rse",
+            family: Family::Classical,
+            mode: ExecutionMode::Iterative,
+            summary: "rse, replaced",
+            defaults: echo_defaults,
+            build: echo_build,
+        }];
+        let mut r = Registry::builtin();
+        r.replace(ECHO_RSE).unwrap();
+        assert_eq!(r.names(), NAMES, "same names, same order");
+        assert_eq!(r.get("rse").unwrap().summary, "rse, replaced");
+        assert_eq!(r.by_name("rse").unwrap().params(), json!({"k": 3}), "the new row builds");
+        // Unknown names, another family or mode, and repeats are refused, and nothing changes.
+        let mut r = Registry::builtin();
+        assert_eq!(
+            r.replace(OTHER).err().unwrap(),
+            "planner \"echo\" is not registered, so it cannot be replaced"
+        );
+        let other_mode = [PlannerEntry { mode: ExecutionMode::BudgetedPlan, ..ECHO_RSE[0] }];
+        assert!(r.replace(&other_mode).err().unwrap().contains("family and mode"));
+        assert!(r.replace(&[ECHO_RSE[0], ECHO_RSE[0]]).err().unwrap().contains("replaced twice"));
+        assert!(r.replace(&[ECHO_RSE[0], OTHER[0]]).is_err());
+        assert_ne!(r.get("rse").unwrap().summary, "rse, replaced", "a failed replace changes nothing");
     }
 
     #[test]

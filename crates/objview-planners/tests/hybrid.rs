@@ -84,8 +84,16 @@ fn oracle_scp_covers_a_convex_object_and_identity_never_beats_oracle() {
 #[test]
 fn net_is_refused_with_a_clear_error() {
     let err = with_params("completion-scp", &[("completion".into(), json!("net"))]).err().unwrap();
-    assert!(err.contains("the net completion backend is not available yet"), "{err}");
+    assert!(err.contains("the net completion backend is not linked into these planner rows"), "{err}");
     assert!(with_params("completion-mcp", &[("completion".into(), json!("pointr"))]).is_err());
+    // Weights are read by net only: naming them with another backend is an error.
+    let err = with_params(
+        "completion-scp",
+        &[("completion".into(), json!("identity")), ("completion_weights".into(), json!("w.safetensors"))],
+    )
+    .err()
+    .unwrap();
+    assert!(err.contains("completion_weights is read by completion=net only"), "{err}");
     let p = with_params("completion-scp", &[("completion".into(), json!("oracle"))]).unwrap();
     assert!(p.needs_ground_truth());
     assert_eq!(p.params()["completion_bound"], "upper_bound");

@@ -2,8 +2,9 @@
 //! behaviour in `shared/research/learned-baselines.md` §5).
 //!
 //! Why a trait: the hybrid planners (completion + NBV / set cover / max coverage) must not care
-//! where the completed shape comes from. The learned PoinTr-style network (`net`, to live in
-//! `objview-learn`) implements [`Completion`] like the two backends here:
+//! where the completed shape comes from. The learned network (`net`, in `objview-learn`:
+//! `objview_learn::completion_backend::NetCompletion`, which needs Burn and so cannot live in
+//! this crate) implements [`Completion`] like the two backends here:
 //!
 //! - [`IdentityCompletion`] (`identity`): predicts nothing, so the "completion" is the input
 //!   alone — a **lower bound** (what the planning steps do with no shape prior at all);
@@ -45,9 +46,11 @@ pub enum CompletionError {
     /// A backend name that is not known.
     #[error("unknown completion backend {0:?} (known: net, oracle, identity)")]
     UnknownBackend(String),
-    /// The learned backend is requested but not built yet.
+    /// The learned backend is requested where it is not linked (this crate's own rows; the
+    /// learned-planner crate provides the rows that build it).
     #[error(
-        "the net completion backend is not available yet (use completion=oracle or completion=identity)"
+        "the net completion backend is not linked into these planner rows (it comes with objview-learn's \
+         hybrid rows, as in the objview CLI; here use completion=oracle or completion=identity)"
     )]
     NetUnavailable,
     /// The oracle backend was used without ground-truth access.
@@ -137,6 +140,11 @@ pub trait Completion: Send {
     /// Whether it reads the ground truth (then the planner asks the environment for it).
     fn needs_ground_truth(&self) -> bool {
         false
+    }
+    /// What to record about the backend in results (the net: its weights, shape, hash), or
+    /// null for nothing beyond its name and bound.
+    fn describe(&self) -> serde_json::Value {
+        serde_json::Value::Null
     }
     /// Starts an episode (the oracle takes the ground truth from `ctx.oracle` here).
     fn reset(&mut self, _ctx: &EpisodeContext) -> Result<(), CompletionError> {
@@ -274,7 +282,8 @@ impl Completion for OracleCompletion {
 }
 
 /// The backend called `name`: `identity`, `oracle`; `net` is refused
-/// ([`CompletionError::NetUnavailable`]) until the learned backend exists.
+/// ([`CompletionError::NetUnavailable`]): it is built by the learned-planner crate
+/// ([`super::NetBackend`]).
 pub fn backend(name: &str) -> Result<Box<dyn Completion>, CompletionError> {
     match name {
         "identity" => Ok(Box::new(IdentityCompletion)),
@@ -420,7 +429,8 @@ mod tests {
         assert!(o.needs_ground_truth() && o.bound() == CompletionBound::UpperBound);
         assert_eq!(
             backend("net").err().unwrap().to_string(),
-            "the net completion backend is not available yet (use completion=oracle or completion=identity)"
+            "the net completion backend is not linked into these planner rows (it comes with objview-learn's \
+             hybrid rows, as in the objview CLI; here use completion=oracle or completion=identity)"
         );
         assert!(matches!(backend("pointr"), Err(CompletionError::UnknownBackend(_))));
     }

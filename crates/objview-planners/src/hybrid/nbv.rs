@@ -144,9 +144,17 @@ pub fn score_points(partial: &[[f64; 3]], completed: &[[f64; 3]]) -> (Vec<[f64; 
 }
 
 impl CompletionNbv {
-    /// The planner with `settings` (the backend must exist).
+    /// The planner with `settings` (the backend must exist; `net` is refused).
     pub fn new(settings: HybridSettings) -> Result<CompletionNbv, String> {
-        let backend = settings.backend()?;
+        CompletionNbv::with_net(settings, None)
+    }
+
+    /// The planner with `settings`, the `net` backend built by `net` when given.
+    pub fn with_net(
+        settings: HybridSettings,
+        net: Option<super::NetBackend>,
+    ) -> Result<CompletionNbv, String> {
+        let backend = settings.backend_with(net)?;
         Ok(CompletionNbv {
             name: format!("completion-nbv[{}]", backend.name()),
             settings,
@@ -181,7 +189,7 @@ impl Planner for CompletionNbv {
         ExecutionMode::Iterative
     }
     fn params(&self) -> serde_json::Value {
-        serde_json::json!({
+        let mut p = serde_json::json!({
             "completion": self.backend.name(),
             "completion_bound": self.backend.bound(),
             "gain_ratio": self.settings.gain_ratio,
@@ -190,7 +198,9 @@ impl Planner for CompletionNbv {
             "hpr_radius": "max(maxdist + 1/32, 100 * max(aabb_diagonal, 1/32))",
             "voxels": {"partial": super::steps::PARTIAL_VOXEL, "plan": PLAN_VOXEL},
             "sor": "none",
-        })
+        });
+        super::describe_backend(&mut p, self.backend.as_ref());
+        p
     }
     fn needs_ground_truth(&self) -> bool {
         self.backend.needs_ground_truth()

@@ -122,9 +122,18 @@ pub struct CompletionPlan {
 }
 
 impl CompletionPlan {
-    /// The planner of `kind` with `settings` (the backend must exist).
+    /// The planner of `kind` with `settings` (the backend must exist; `net` is refused).
     pub fn new(kind: PlanKind, settings: HybridSettings) -> Result<CompletionPlan, String> {
-        let backend = settings.backend()?;
+        CompletionPlan::with_net(kind, settings, None)
+    }
+
+    /// The planner of `kind` with `settings`, the `net` backend built by `net` when given.
+    pub fn with_net(
+        kind: PlanKind,
+        settings: HybridSettings,
+        net: Option<super::NetBackend>,
+    ) -> Result<CompletionPlan, String> {
+        let backend = settings.backend_with(net)?;
         let base = match kind {
             PlanKind::SetCover => "completion-scp",
             PlanKind::MaxCoverage => "completion-mcp",
@@ -303,7 +312,7 @@ impl Planner for CompletionPlan {
         }
     }
     fn params(&self) -> serde_json::Value {
-        serde_json::json!({
+        let mut p = serde_json::json!({
             "completion": self.backend.name(),
             "completion_bound": self.backend.bound(),
             "ilp_time_limit_s": self.settings.ilp_time_limit_s,
@@ -312,7 +321,9 @@ impl Planner for CompletionPlan {
             "voxels": {"partial": super::steps::PARTIAL_VOXEL, "plan": super::steps::PLAN_VOXEL},
             "order": "exact_shortest_open_path",
             "start_view_quirk": "not reproduced (chosen = bootstrap only)",
-        })
+        });
+        super::describe_backend(&mut p, self.backend.as_ref());
+        p
     }
     fn needs_ground_truth(&self) -> bool {
         self.backend.needs_ground_truth()

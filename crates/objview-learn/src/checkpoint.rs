@@ -1,5 +1,5 @@
 //! The training loops' shared file plumbing (NBV-Net in [`crate::train`], MA-SCVP in
-//! [`crate::mascvp_train`]): reproducible safetensors weights, and per-epoch checkpoints that let
+//! [`crate::mascvp_train`], the completion network in [`crate::completion_train`]): reproducible safetensors weights, and per-epoch checkpoints that let
 //! `--resume` continue a run exactly where it stopped.
 //!
 //! A run writing `W.safetensors` keeps `W.safetensors.checkpoints/`: per epoch k the evaluation

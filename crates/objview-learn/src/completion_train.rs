@@ -33,8 +33,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use burn::module::Module;
-use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer, OptimizerRecord};
-use burn::store::{BurnpackStore, ModuleSnapshot, SafetensorsStore};
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor, TensorData};
 use objview_geom::hash::fnv1a64;
 use objview_planners::hybrid::completion::{resample, INPUT_POINTS};
@@ -46,9 +45,10 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
+use crate::checkpoint::{load_safetensors, save_safetensors, trajectory_settings, Checkpoints};
 use crate::completion_net::{chamfer_l1, chamfer_loss, to_f64, Chamfer, CompletionNet, CompletionShape};
 use crate::npz::{Dtype, NpzReader};
-use crate::train::{checkpoint_dir, is_validation, mix, read_manifest, sidecar_path};
+use crate::train::{is_validation, mix, read_manifest, sidecar_path};
 use crate::LearnError;
 
 /// Every training setting of the completion network (recorded in the sidecar).
@@ -452,13 +452,9 @@ pub fn select_completion_epoch(history: &[CompletionEpochLog], has_validation: b
     best.epoch
 }
 
-/// Saves `net` as safetensors at `path` (one metadata key, so the bytes are reproducible).
+/// Saves `net` as safetensors at `path` ([`save_safetensors`]: reproducible bytes).
 pub fn save_completion_weights(net: &CompletionNet, path: &Path) -> Result<(), LearnError> {
-    let mut store = SafetensorsStore::from_file(path)
-        .clear_metadata()
-        .metadata("producer", "objview (burn 0.22.1)")
-        .overwrite(true);
-    net.save_into(&mut store).map_err(|e| LearnError::io(path, format!("cannot save weights: {e:?}")))
+    save_safetensors(net, path)
 }
 
 /// Loads safetensors bytes into a fresh network of `shape`; every tensor must be present.
@@ -469,14 +465,7 @@ pub fn load_completion_weights_bytes(
 ) -> Result<CompletionNet, String> {
     shape.validate().map_err(|e| e.to_string())?;
     let mut net = CompletionNet::new(shape, device);
-    let mut store = SafetensorsStore::from_bytes(Some(bytes.to_vec()));
-    let r = net.load_from(&mut store).map_err(|e| format!("cannot load weights: {e:?}"))?;
-    if !r.errors.is_empty() || !r.missing.is_empty() {
-        return Err(format!(
-            "weights do not fit the completion shape {shape:?}: missing {:?}, errors {:?}",
-            r.missing, r.errors
-        ));
-    }
+    load_safetensors(&mut net, bytes, &format!("the completion shape {shape:?}"))?;
     Ok(net)
 }
 
@@ -527,45 +516,23 @@ pub fn train_completion(
     let params = net.num_params();
     let mut optim: ModuleOptimizer = AdamConfig::new().with_epsilon(1e-8).init();
 
-    let ckpt = checkpoint_dir(out);
-    std::fs::create_dir_all(&ckpt).map_err(|e| LearnError::io(&ckpt, e))?;
-    let state_path = ckpt.join("state.json");
     let settings_json = serde_json::to_value(settings).expect("settings serialize");
+    let identity = json!({
+        "network": "completion",
+        "settings": trajectory_settings(&settings_json, &["epochs"]),
+        "data": data.display().to_string(),
+        "objects": only,
+    });
+    let ckpt = Checkpoints::create(out, identity)?;
     let mut history: Vec<CompletionEpochLog> = Vec::new();
-    let mut start_epoch = 1;
-    if resume && state_path.is_file() {
-        let text = std::fs::read_to_string(&state_path).map_err(|e| LearnError::io(&state_path, e))?;
-        let st: Value = serde_json::from_str(&text).map_err(|e| LearnError::io(&state_path, e))?;
-        let (mut same, mut want) = (st["settings"].clone(), settings_json.clone());
-        for v in [&mut same, &mut want] {
-            if let Some(m) = v.as_object_mut() {
-                m.remove("epochs");
-            }
-        }
-        if st["network"] != "completion"
-            || same != want
-            || st["data"] != json!(data.display().to_string())
-            || st["objects"] != json!(only)
-        {
-            return Err(LearnError::Invalid(format!(
-                "{}: the checkpoint was made with other settings or data; remove the folder or drop --resume",
-                state_path.display()
-            )));
-        }
-        history =
-            serde_json::from_value(st["history"].clone()).map_err(|e| LearnError::io(&state_path, e))?;
-        history.truncate(settings.epochs);
-        let k = history.len();
-        start_epoch = k + 1;
-        if k > 0 && k < settings.epochs {
-            let w = ckpt.join(format!("epoch-{k}.bpk"));
-            net.load_from(&mut BurnpackStore::from_file(&w))
-                .map_err(|e| LearnError::io(&w, format!("{e:?}")))?;
-            let o = ckpt.join(format!("epoch-{k}.optim"));
-            let rec = OptimizerRecord::load(&o).map_err(|e| LearnError::io(&o, format!("{e:?}")))?;
+    if resume {
+        let (h, rec) = ckpt.resume(settings.epochs, &mut net)?;
+        history = h;
+        if let Some(rec) = rec {
             optim = optim.load_record(rec);
         }
     }
+    let start_epoch = history.len() + 1;
 
     for epoch in start_epoch..=settings.epochs {
         let t = Instant::now();
@@ -611,20 +578,11 @@ pub fn train_completion(
         };
         progress.epoch(&log);
         history.push(log);
-        save_completion_weights(&valid, &ckpt.join(format!("epoch-{epoch}.safetensors")))?;
-        let bpk = ckpt.join(format!("epoch-{epoch}.bpk"));
-        net.save_into(&mut BurnpackStore::from_file(&bpk).overwrite(true))
-            .map_err(|e| LearnError::io(&bpk, format!("cannot save the checkpoint: {e:?}")))?;
-        let o = ckpt.join(format!("epoch-{epoch}.optim"));
-        optim.to_record().save(&o).map_err(|e| LearnError::io(&o, format!("{e:?}")))?;
-        let st = json!({"network": "completion", "settings": settings_json, "data": data.display().to_string(), "objects": only, "history": history});
-        std::fs::write(&state_path, serde_json::to_string_pretty(&st).expect("json"))
-            .map_err(|e| LearnError::io(&state_path, e))?;
+        ckpt.save(epoch, &valid, &net, &optim, &history)?;
     }
 
     let best_epoch = select_completion_epoch(&history, !val_set.is_empty());
-    let best = ckpt.join(format!("epoch-{best_epoch}.safetensors"));
-    std::fs::copy(&best, out).map_err(|e| LearnError::io(out, e))?;
+    ckpt.keep(best_epoch, out)?;
     let val = if val_set.is_empty() {
         CompletionEval::default()
     } else {

@@ -35,7 +35,12 @@ fn main() {
     let plans: &[(PlanKind, Budget)] = if nbv_only {
         &[]
     } else {
-        &[(PlanKind::SetCover, Budget::Auto), (PlanKind::MaxCoverage, Budget::Fixed(10))]
+        &[
+            (PlanKind::SetCover, Budget::Auto),
+            (PlanKind::MaxCoverage, Budget::Fixed(5)),
+            (PlanKind::MaxCoverage, Budget::Fixed(10)),
+            (PlanKind::MaxCoverage, Budget::Fixed(30)),
+        ]
     };
     for &(kind, budget) in plans {
         for completion in ["oracle", "identity"] {

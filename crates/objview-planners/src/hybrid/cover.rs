@@ -8,7 +8,11 @@
 //!   `max Σ w_g y_g  s.t.  Σ x_i ≤ B,  y_g ≤ Σ_{i covers g} x_i,  x binary,  y ∈ [0, 1]`, where
 //!   elements covered by exactly the same candidates are merged into one group g of weight w_g
 //!   (an exact reduction; y needs no integrality: for binary x the optimum has y_g =
-//!   min(1, Σ x_i)). Warm-started from the greedy selection;
+//!   min(1, Σ x_i)). Warm-started from the greedy selection. Before the ILP, two exact
+//!   shortcuts: a selection covering every reachable element is optimal (nothing can cover
+//!   more), so when the greedy selection is one, or the exact set cover (on a share of the time
+//!   limit) finds a cover of at most B columns, that is the answer — the common case at large
+//!   budgets (K = 30), where the ILP would spend its time proving the bound it already meets;
 //! - [`farthest_fill`]: the budget fill, farthest-point sampling over candidate positions.
 //!
 //! Status semantics, as everywhere in the workspace: a solve is `optimal` only when proven; a
@@ -26,6 +30,12 @@ use super::steps::bit;
 
 /// Default wall-clock limit of the planners' ILPs (the reference's 10 s).
 pub const DEFAULT_ILP_TIME_LIMIT_S: f64 = 10.0;
+
+/// Max coverage first looks for a full cover within the budget with the exact set-cover search,
+/// on this share of its time limit (at most [`FULL_COVER_MAX_S`]); the ILP gets what is left.
+pub const FULL_COVER_SHARE: f64 = 0.2;
+/// See [`FULL_COVER_SHARE`].
+pub const FULL_COVER_MAX_S: f64 = 2.0;
 
 /// What an exact selection step returned.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -191,6 +201,30 @@ pub fn max_coverage(covers: &[Vec<u64>], needed: &[u64], budget: usize, time_lim
     }
     let greedy = greedy_max_coverage(&cols, &weights, budget);
     let value = |chosen: &[usize]| covered_by(&views, chosen, needed);
+    // Covering every reachable element is optimal whatever the instance (the count cannot
+    // exceed it), so a full cover within the budget needs no ILP: the greedy selection when it
+    // is one, else a set cover of size ≤ budget found (or excluded) by the exact cover search
+    // on part of the time limit.
+    let full = |chosen: Vec<usize>, t: Instant| Selection {
+        covered: reachable,
+        chosen,
+        needed: reachable,
+        status: "optimal".into(),
+        bound: reachable as f64,
+        gap: 0.0,
+        seconds: t.elapsed().as_secs_f64(),
+    };
+    if value(&greedy) == reachable {
+        return full(greedy, t);
+    }
+    let cover_limit = (time_limit_s * FULL_COVER_SHARE).min(FULL_COVER_MAX_S);
+    let settings = CoverSettings { time_limit_s: cover_limit, ..CoverSettings::default() };
+    if let Ok(r) = solve_min_cover(&views, &settings) {
+        if !r.best_cover.is_empty() && r.best_cover.len() <= budget && value(&r.best_cover) == reachable {
+            return full(r.best_cover, t);
+        }
+    }
+    let time_limit_s = (time_limit_s - t.elapsed().as_secs_f64()).max(0.0);
     // Dominated columns (group set ⊆ another kept column's; equal sets keep the smaller index)
     // are dropped: a solution using one can use its dominator instead, so the optimum stays.
     let kept = undominated(&cols, weights.len());

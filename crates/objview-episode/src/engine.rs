@@ -535,6 +535,7 @@ impl Episode {
             } else {
                 0.0
             },
+            planner_notes: None,
         }
     }
 }
@@ -624,7 +625,8 @@ pub fn run_episode(
             }
         }
     }
-    let result = ep.finish(settings_record);
+    let mut result = ep.finish(settings_record);
+    result.planner_notes = catch_unwind(AssertUnwindSafe(|| planner.notes())).ok().flatten();
     match result.non_finite() {
         Some(field) => Err(EpisodeError::NonFinite(field)),
         None => Ok(result),

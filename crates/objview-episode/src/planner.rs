@@ -144,6 +144,31 @@ pub trait Planner: Send {
     fn reset(&mut self, ctx: &EpisodeContext, env: &dyn Environment) -> Result<(), PlannerError>;
     /// The next action after observation `obs`.
     fn act(&mut self, obs: &Observation, env: &dyn Environment) -> Result<Action, PlannerError>;
+    /// What the planner decided in this episode that a reader of its results needs to judge
+    /// them — an exact solver's status, proven bound and gap (a solve stopped by its time
+    /// limit is never reported optimal), the sizes it planned on — written as the result's
+    /// `planner_notes` (absent when `None`). Read once, after the episode ended. It must be
+    /// a function of the episode alone (no wall-clock seconds: `--no-timings` results are
+    /// byte-identical across runs), and every number in it finite.
+    fn notes(&self) -> Option<serde_json::Value> {
+        None
+    }
+}
+
+/// `value` without its wall-clock fields: every object key named `seconds` or ending in
+/// `_seconds`, at any depth. For [`Planner::notes`] built from a planner's own records.
+pub fn without_seconds(value: serde_json::Value) -> serde_json::Value {
+    use serde_json::Value;
+    match value {
+        Value::Object(m) => Value::Object(
+            m.into_iter()
+                .filter(|(k, _)| k != "seconds" && !k.ends_with("_seconds"))
+                .map(|(k, v)| (k, without_seconds(v)))
+                .collect(),
+        ),
+        Value::Array(a) => Value::Array(a.into_iter().map(without_seconds).collect()),
+        other => other,
+    }
 }
 
 /// The per-episode seed of SPEC §5: a 64-bit mix (FNV-1a, then SplitMix64) of the user seed,
@@ -163,6 +188,23 @@ pub fn episode_seed(seed: u64, object_id: &str, view_space: &str, budget: Budget
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn without_seconds_drops_every_wall_clock_field_at_any_depth() {
+        let v = serde_json::json!({
+            "status": "optimal", "seconds": 1.5, "plan_seconds": 2.0,
+            "selection": {"gap": 0.0, "seconds": 0.1, "seconds_left": 3},
+            "paths": [{"lock_wait_seconds": 0.2, "length": 4.0}]
+        });
+        assert_eq!(
+            without_seconds(v),
+            serde_json::json!({
+                "status": "optimal",
+                "selection": {"gap": 0.0, "seconds_left": 3},
+                "paths": [{"length": 4.0}]
+            })
+        );
+    }
 
     #[test]
     fn stop_reasons_round_trip() {

@@ -175,6 +175,11 @@ pub struct EpisodeResult {
     pub gt_source: String,
     /// Wall time of the episode (seconds), set-up included.
     pub wall_seconds: f64,
+    /// The planner's own record of its decisions ([`crate::Planner::notes`]: e.g. the hybrids'
+    /// ILP status, bound and gap); absent for planners that keep none. Last in the line, so a
+    /// remote run appends it to the server's line ([`EpisodeResult::append_planner_notes`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub planner_notes: Option<serde_json::Value>,
 }
 
 impl EpisodeResult {
@@ -236,6 +241,27 @@ impl EpisodeResult {
         }
         (!self.wall_seconds.is_finite()).then(|| "wall_seconds".to_string())
     }
+
+    /// `line` (one serialized result without `planner_notes`, as a server writes it) with
+    /// `notes` added exactly as [`EpisodeResult`] serializes them — the last field — so a
+    /// remote run's line equals the local run's byte for byte. `None` leaves the line as it
+    /// is. Errors: `line` is not a JSON object or already carries `planner_notes`.
+    pub fn append_planner_notes(line: &str, notes: Option<&serde_json::Value>) -> Result<String, String> {
+        let Some(notes) = notes else { return Ok(line.to_string()) };
+        let trimmed = line.trim_end();
+        let parsed: serde_json::Value =
+            serde_json::from_str(trimmed).map_err(|e| format!("result line is not JSON: {e}"))?;
+        let Some(fields) = parsed.as_object() else {
+            return Err("result line is not a JSON object".into());
+        };
+        if fields.contains_key("planner_notes") {
+            return Err("result line already has planner_notes".into());
+        }
+        let body = trimmed.strip_suffix('}').ok_or("result line does not end with `}`")?;
+        let notes = serde_json::to_string(notes).map_err(|e| format!("planner_notes: {e}"))?;
+        let sep = if fields.is_empty() { "" } else { "," };
+        Ok(format!("{body}{sep}\"planner_notes\":{notes}}}"))
+    }
 }
 
 #[cfg(test)]
@@ -288,7 +314,28 @@ mod tests {
             gt_points: 1,
             gt_source: "sampled".into(),
             wall_seconds: 0.0,
+            planner_notes: None,
         }
+    }
+
+    #[test]
+    fn planner_notes_are_absent_when_none_and_appended_as_the_local_line_writes_them() {
+        let plain = result(0.1);
+        let line = serde_json::to_string(&plain).unwrap();
+        assert!(!line.contains("planner_notes"));
+        let notes = serde_json::json!({"plan": {"status": "time_limit", "bound": 12.0, "gap": 2.0}});
+        let mut noted = plain.clone();
+        noted.planner_notes = Some(notes.clone());
+        let local = serde_json::to_string(&noted).unwrap();
+        assert_eq!(EpisodeResult::append_planner_notes(&line, Some(&notes)).unwrap(), local);
+        assert_eq!(EpisodeResult::append_planner_notes(&line, None).unwrap(), line);
+        let back: EpisodeResult = serde_json::from_str(&local).unwrap();
+        assert_eq!(back, noted);
+        // Older lines (no field) still read.
+        assert_eq!(serde_json::from_str::<EpisodeResult>(&line).unwrap().planner_notes, None);
+        let err = EpisodeResult::append_planner_notes(&local, Some(&notes)).unwrap_err();
+        assert!(err.contains("already"), "{err}");
+        assert!(EpisodeResult::append_planner_notes("[1]", Some(&notes)).is_err());
     }
 
     #[test]

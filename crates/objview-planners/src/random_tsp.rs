@@ -148,6 +148,13 @@ impl Planner for RandomTsp {
         })
     }
 
+    /// `{"plan": PlanInfo}` without its seconds: the drawn views and the open-path solve
+    /// (`optimal` only when proven, with its lower bound).
+    fn notes(&self) -> Option<serde_json::Value> {
+        let plan = serde_json::to_value(self.info.as_ref()?).ok()?;
+        Some(objview_episode::without_seconds(serde_json::json!({ "plan": plan })))
+    }
+
     fn reset(&mut self, ctx: &EpisodeContext, env: &dyn Environment) -> Result<(), PlannerError> {
         self.plan = None;
         self.next = 0;

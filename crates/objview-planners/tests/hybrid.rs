@@ -67,7 +67,19 @@ fn oracle_scp_covers_a_convex_object_and_identity_never_beats_oracle() {
         assert!(o >= 0.99, "{name}: oracle SCP NSC@0.02 = {o}");
         if name == "torus" {
             assert!(oracle.visited_poses.len() > 2 && i < 0.95, "{name}: the plan matters here");
+            // The plan's record is in the result: the set cover proven optimal, its size the
+            // views planned after the bootstrap, and no wall-clock field in it.
+            let plan = &oracle.planner_notes.as_ref().expect("planner_notes")["plan"];
+            assert_eq!(plan["selection"]["status"], "optimal", "{plan}");
+            assert_eq!(plan["selection"]["gap"], 0.0);
+            let planned = plan["visit_order"].as_array().unwrap().len();
+            assert_eq!(planned, oracle.visited_poses.len() - 2, "{plan}");
+            assert_eq!(plan["selection"]["chosen"].as_array().unwrap().len(), planned);
+            assert_eq!(plan["completion"], "oracle");
+            assert!(!plan.to_string().contains("seconds"), "{plan}");
         }
+        let plan = &identity.planner_notes.as_ref().expect("planner_notes")["plan"];
+        assert_eq!(plan["selection"]["status"], "skipped", "{plan}");
         let k = 5;
         let om = run(&sc, "completion-mcp", "oracle", Budget::Fixed(k));
         let im = run(&sc, "completion-mcp", "identity", Budget::Fixed(k));

@@ -672,3 +672,40 @@ pub fn summary_csv(aggregates: &[Aggregate], tau: &str, taus: &[String]) -> Stri
         .collect();
     csv(&headers, &rows)
 }
+
+/// The solver-status summary in Markdown (empty when no episode carries plan notes).
+pub fn solver_markdown(rows: &[crate::tables::SolverRow]) -> String {
+    if rows.is_empty() {
+        return String::new();
+    }
+    let headers = [
+        ("View space".to_string(), Align::Left),
+        ("Method".to_string(), Align::Left),
+        ("Budget".to_string(), Align::Left),
+        ("Plans".to_string(), Align::Right),
+        ("Selection ILP".to_string(), Align::Left),
+        ("Max gap".to_string(), Align::Right),
+        ("Paths not proven shortest".to_string(), Align::Right),
+    ];
+    let body: Vec<Vec<String>> = rows
+        .iter()
+        .map(|r| {
+            let sel: Vec<String> = r.selection.iter().map(|(s, c)| format!("{c} `{s}`")).collect();
+            vec![
+                r.view_space.clone(),
+                r.method.clone(),
+                r.budget.clone(),
+                r.plans.to_string(),
+                if sel.is_empty() { "—".into() } else { sel.join(", ") },
+                r.max_gap.map_or("—".into(), |g| format!("{g}")),
+                format!("{} of {}", r.paths_not_proven, r.paths),
+            ]
+        })
+        .collect();
+    format!(
+        "## Exact solver status\n\nFrom the planners' `planner_notes.plan`: the selection ILP's status per \
+         plan (`optimal` only when proven; `time_limit` keeps its incumbent, and the gap to its proven \
+         bound is in voxels or views) and the open-path solves not proven shortest.\n\n{}",
+        table(&headers, &body)
+    )
+}

@@ -203,6 +203,8 @@ pub struct Report {
     pub map_stabilization: Option<MsTable>,
     /// Terminal reasons and failures per (view space, method).
     pub terminal: TerminalTable,
+    /// Exact solver status per (view space, method, budget), from `planner_notes`.
+    pub solver: Vec<crate::tables::SolverRow>,
     /// Curves of the NSC-vs-views figures.
     pub curves: Vec<Curve>,
     /// Points of the path-cost-vs-NSC figures.
@@ -372,6 +374,7 @@ pub fn build_report(
         reachability: reach,
         map_stabilization: map_stab,
         terminal,
+        solver: crate::tables::solver_summary(episodes),
     })
 }
 
@@ -387,8 +390,11 @@ impl Report {
             render::reach_markdown(&self.reachability, tau),
             render::ms_markdown(self.map_stabilization.as_ref(), tau),
             render::terminal_markdown(&self.terminal),
-            render::failures_markdown(&self.failures, &self.inputs, s.failures_listed),
         ];
+        if !self.solver.is_empty() {
+            parts.push(render::solver_markdown(&self.solver));
+        }
+        parts.push(render::failures_markdown(&self.failures, &self.inputs, s.failures_listed));
         if !self.skipped.is_empty() {
             parts.push(render::skipped_markdown(&self.skipped, &self.inputs, s.failures_listed));
         }
@@ -517,6 +523,7 @@ impl Report {
                 "table4_reachability": val(&self.reachability),
                 "table5_map_stabilization": val(&self.map_stabilization),
                 "terminal_reasons": val(&self.terminal),
+                "solver_status": val(&self.solver),
             },
             "summary": val(&self.aggregates),
             "figures": val(figures),

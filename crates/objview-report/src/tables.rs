@@ -16,6 +16,10 @@
 //!   triggered, counted), Tammes-128 NSC at `terminal` (the run exhausts the 128 candidates).
 //!   d_sat and d_plan are means over the pool's objects (d_plan over those with a proven one),
 //!   the other columns means over runs.
+//! - The solver-status summary counts, per (view space, method, budget), the statuses of the
+//!   exact steps that planners record in `planner_notes.plan` (the hybrids' selection ILP:
+//!   `selection.status`, `selection.gap`; every open-path solve: `tsp.optimal`), so a plan
+//!   stopped by a time limit is visible next to the numbers it produced.
 
 use std::cmp::Ordering;
 use std::collections::{BTreeMap, BTreeSet};
@@ -498,6 +502,67 @@ pub fn terminal_summary(episodes: &[Episode], failures: &[FailureLine]) -> Termi
     TerminalTable { reasons, rows }
 }
 
+/// A row of the solver-status summary.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SolverRow {
+    /// View space.
+    pub view_space: String,
+    /// Method name.
+    pub method: String,
+    /// Budget label (`5`, `auto`, …).
+    pub budget: String,
+    /// Episodes whose notes hold a plan.
+    pub plans: usize,
+    /// Plans per selection status (`optimal`, `time_limit`, `skipped`, `error: …`); empty for
+    /// planners without a selection step.
+    pub selection: BTreeMap<String, usize>,
+    /// Largest recorded selection gap (|objective − proven bound|; 0 when every solve was
+    /// proven), `None` without a selection step.
+    pub max_gap: Option<f64>,
+    /// Plans with an open-path solve, and those whose path is not proven shortest.
+    pub paths: usize,
+    /// See `paths`.
+    pub paths_not_proven: usize,
+}
+
+/// Per (view space, method, budget), what the planners' exact steps reported
+/// (`planner_notes.plan`); rows only for episodes that carry such notes, sorted by view space,
+/// method, budget.
+pub fn solver_summary(episodes: &[Episode]) -> Vec<SolverRow> {
+    let mut rows: BTreeMap<(String, String, String), SolverRow> = BTreeMap::new();
+    for e in episodes {
+        let Some(plan) = e.result.planner_notes.as_ref().and_then(|n| n.get("plan")) else { continue };
+        let budget = e.result.budget.label();
+        let r = rows
+            .entry((e.result.view_space.clone(), e.result.method.clone(), budget.clone()))
+            .or_insert_with(|| SolverRow {
+                view_space: e.result.view_space.clone(),
+                method: e.result.method.clone(),
+                budget,
+                plans: 0,
+                selection: BTreeMap::new(),
+                max_gap: None,
+                paths: 0,
+                paths_not_proven: 0,
+            });
+        r.plans += 1;
+        if let Some(sel) = plan.get("selection") {
+            let status = sel.get("status").and_then(|s| s.as_str()).unwrap_or("unknown");
+            *r.selection.entry(status.to_string()).or_default() += 1;
+            // A gap the line could not state (null) counts as unbounded.
+            let gap = sel.get("gap").map_or(0.0, |g| g.as_f64().unwrap_or(f64::INFINITY));
+            r.max_gap = Some(r.max_gap.map_or(gap, |m: f64| m.max(gap)));
+        }
+        if let Some(tsp) = plan.get("tsp").filter(|t| !t.is_null()) {
+            r.paths += 1;
+            if tsp.get("optimal").and_then(|o| o.as_bool()) != Some(true) {
+                r.paths_not_proven += 1;
+            }
+        }
+    }
+    rows.into_values().collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -560,5 +625,43 @@ mod tests {
         assert_eq!(t.counts[0].qualifying, 1);
         // Nothing in another view space.
         assert!(quality_top(&aggs, "quarter", &[k5], 3).rows.is_empty());
+    }
+
+    #[test]
+    fn solver_summary_counts_statuses_gaps_and_unproven_paths() {
+        use crate::testutil::{episode, Spec};
+        let mut eps = Vec::new();
+        for (uid, status, gap, optimal) in
+            [("a", "optimal", 0.0, true), ("b", "time_limit", 7.0, true), ("c", "time_limit", 3.0, false)]
+        {
+            let mut s = Spec::new(uid, "completion-mcp[net]");
+            s.budget = "10";
+            let mut e = episode(&s);
+            e.result.planner_notes = Some(serde_json::json!({"plan": {
+                "selection": {"status": status, "gap": gap}, "tsp": {"optimal": optimal}}}));
+            eps.push(e);
+        }
+        // A plan without a selection step (random-tsp), and an episode without notes.
+        let mut e = episode(&Spec::new("a", "random-tsp"));
+        e.result.planner_notes = Some(serde_json::json!({"plan": {"tsp": {"optimal": true}}}));
+        eps.push(e);
+        eps.push(episode(&Spec::new("a", "rse")));
+        let rows = solver_summary(&eps);
+        assert_eq!(rows.len(), 2);
+        let mcp = &rows[0];
+        assert_eq!((mcp.method.as_str(), mcp.budget.as_str(), mcp.plans), ("completion-mcp[net]", "10", 3));
+        assert_eq!(mcp.selection, BTreeMap::from([("optimal".into(), 1), ("time_limit".into(), 2)]));
+        assert_eq!(mcp.max_gap, Some(7.0));
+        assert_eq!((mcp.paths, mcp.paths_not_proven), (3, 1));
+        let tsp = &rows[1];
+        assert_eq!(
+            (tsp.method.as_str(), tsp.plans, tsp.max_gap, tsp.paths_not_proven),
+            ("random-tsp", 1, None, 0)
+        );
+        assert!(tsp.selection.is_empty());
+        let md = crate::render::solver_markdown(&rows);
+        assert!(md.contains("1 `optimal`, 2 `time_limit`"), "{md}");
+        assert!(md.contains("| 1 of 3 |"), "{md}");
+        assert_eq!(crate::render::solver_markdown(&[]), "");
     }
 }

@@ -126,6 +126,7 @@ impl Spec {
             gt_points: 20000,
             gt_source: "sampled".into(),
             wall_seconds: 1.0,
+            planner_notes: None,
         }
     }
 

@@ -10,7 +10,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
 use std::time::Duration;
 
-use objview_episode::{Action, Budget, Environment, EpisodeContext, Observation, Planner};
+use objview_episode::{Action, Budget, Environment, EpisodeContext, EpisodeResult, Observation, Planner};
 use objview_geom::Pose;
 use objview_render::Intrinsics;
 use serde_json::{json, Value};
@@ -478,9 +478,11 @@ pub fn run_remote(
             history.push(obs.pose);
         }
     }
-    let mut line = client.result(&id)?;
-    if !line.ends_with('\n') {
-        line.push('\n');
-    }
+    let line = client.result(&id)?;
+    // The planner's notes live on this side: added as the local run adds them (last field).
+    let notes = catch_unwind(AssertUnwindSafe(|| planner.notes())).ok().flatten();
+    let mut line = EpisodeResult::append_planner_notes(line.trim_end(), notes.as_ref())
+        .map_err(|e| protocol(format!("result: {e}")))?;
+    line.push('\n');
     Ok(line)
 }

@@ -94,6 +94,11 @@ fn remote_episodes_write_the_lines_of_local_ones() {
         let v: serde_json::Value = serde_json::from_str(&remote).unwrap();
         assert!(v["steps"].as_array().unwrap().len() > 3, "{name}: a real episode");
         assert_eq!(remote, local, "{name}: remote and local lines differ");
+        // random-tsp keeps notes (its path solve), RSE none: both written alike either way.
+        assert_eq!(
+            v["planner_notes"]["plan"]["tsp"]["optimal"].as_bool(),
+            (name == "random-tsp").then_some(true)
+        );
     }
 }
 

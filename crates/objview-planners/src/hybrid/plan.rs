@@ -328,6 +328,13 @@ impl Planner for CompletionPlan {
     fn needs_ground_truth(&self) -> bool {
         self.backend.needs_ground_truth()
     }
+    /// `{"plan": PlanInfo}` without its seconds (absent when no plan was made): the ILP's
+    /// status (`optimal` only when proven, `time_limit` with its incumbent), bound and gap, the
+    /// sizes the plan was made on, the fill and the path solve.
+    fn notes(&self) -> Option<serde_json::Value> {
+        let plan = serde_json::to_value(self.info.as_ref()?).ok()?;
+        Some(objview_episode::without_seconds(serde_json::json!({ "plan": plan })))
+    }
     fn reset(&mut self, ctx: &EpisodeContext, env: &dyn Environment) -> Result<(), PlannerError> {
         self.budget = match (self.kind, ctx.budget) {
             (PlanKind::MaxCoverage, Budget::Auto) => {

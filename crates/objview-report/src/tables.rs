@@ -527,23 +527,29 @@ pub struct SolverRow {
 
 /// Per (view space, method, budget), what the planners' exact steps reported
 /// (`planner_notes.plan`); rows only for episodes that carry such notes, sorted by view space,
-/// method, budget.
+/// method, budget (numeric, `auto` last).
 pub fn solver_summary(episodes: &[Episode]) -> Vec<SolverRow> {
-    let mut rows: BTreeMap<(String, String, String), SolverRow> = BTreeMap::new();
+    // Budgets in numeric order, `auto` last.
+    let mut rows: BTreeMap<(String, String, usize), SolverRow> = BTreeMap::new();
     for e in episodes {
         let Some(plan) = e.result.planner_notes.as_ref().and_then(|n| n.get("plan")) else { continue };
         let budget = e.result.budget.label();
-        let r = rows
-            .entry((e.result.view_space.clone(), e.result.method.clone(), budget.clone()))
-            .or_insert_with(|| SolverRow {
-                view_space: e.result.view_space.clone(),
-                method: e.result.method.clone(),
-                budget,
-                plans: 0,
-                selection: BTreeMap::new(),
-                max_gap: None,
-                paths: 0,
-                paths_not_proven: 0,
+        let rank = match e.result.budget {
+            objview_episode::Budget::Fixed(k) => k,
+            objview_episode::Budget::Auto => usize::MAX,
+        };
+        let r =
+            rows.entry((e.result.view_space.clone(), e.result.method.clone(), rank)).or_insert_with(|| {
+                SolverRow {
+                    view_space: e.result.view_space.clone(),
+                    method: e.result.method.clone(),
+                    budget,
+                    plans: 0,
+                    selection: BTreeMap::new(),
+                    max_gap: None,
+                    paths: 0,
+                    paths_not_proven: 0,
+                }
             });
         r.plans += 1;
         if let Some(sel) = plan.get("selection") {
@@ -641,19 +647,27 @@ mod tests {
                 "selection": {"status": status, "gap": gap}, "tsp": {"optimal": optimal}}}));
             eps.push(e);
         }
+        // Budgets sort numerically (30 after 10), whatever the input order.
+        let mut s30 = Spec::new("a", "completion-mcp[net]");
+        s30.budget = "30";
+        let mut e30 = episode(&s30);
+        e30.result.planner_notes =
+            Some(serde_json::json!({"plan": {"selection": {"status": "optimal", "gap": 0.0}}}));
+        eps.insert(0, e30);
         // A plan without a selection step (random-tsp), and an episode without notes.
         let mut e = episode(&Spec::new("a", "random-tsp"));
         e.result.planner_notes = Some(serde_json::json!({"plan": {"tsp": {"optimal": true}}}));
         eps.push(e);
         eps.push(episode(&Spec::new("a", "rse")));
         let rows = solver_summary(&eps);
-        assert_eq!(rows.len(), 2);
+        assert_eq!(rows.len(), 3);
+        assert_eq!((rows[1].budget.as_str(), rows[1].plans, rows[1].paths), ("30", 1, 0));
         let mcp = &rows[0];
         assert_eq!((mcp.method.as_str(), mcp.budget.as_str(), mcp.plans), ("completion-mcp[net]", "10", 3));
         assert_eq!(mcp.selection, BTreeMap::from([("optimal".into(), 1), ("time_limit".into(), 2)]));
         assert_eq!(mcp.max_gap, Some(7.0));
         assert_eq!((mcp.paths, mcp.paths_not_proven), (3, 1));
-        let tsp = &rows[1];
+        let tsp = &rows[2];
         assert_eq!(
             (tsp.method.as_str(), tsp.plans, tsp.max_gap, tsp.paths_not_proven),
             ("random-tsp", 1, None, 0)

@@ -626,7 +626,7 @@ pub fn run_episode(
         }
     }
     let mut result = ep.finish(settings_record);
-    result.planner_notes = catch_unwind(AssertUnwindSafe(|| planner.notes())).ok().flatten();
+    result.planner_notes = crate::planner::read_notes(planner);
     match result.non_finite() {
         Some(field) => Err(EpisodeError::NonFinite(field)),
         None => Ok(result),

@@ -22,8 +22,8 @@ pub mod path;
 pub mod planner;
 
 pub use planner::{
-    episode_seed, without_seconds, Action, Environment, EpisodeContext, Observation, OracleAccess, Planner,
-    PlannerError,
+    episode_seed, plan_notes, read_notes, without_seconds, Action, Environment, EpisodeContext, Observation,
+    OracleAccess, Planner, PlannerError,
 };
 pub mod chamfer;
 pub mod coverage;

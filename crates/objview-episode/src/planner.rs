@@ -155,6 +155,20 @@ pub trait Planner: Send {
     }
 }
 
+/// The notes of `planner` as a result line records them: read once, after the episode; a
+/// `notes()` that panics counts as none (the episode's result is not lost to it). Local and
+/// remote runs both read them here, so their lines agree byte for byte.
+pub fn read_notes(planner: &dyn Planner) -> Option<serde_json::Value> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| planner.notes())).ok().flatten()
+}
+
+/// `{"plan": info}` without wall-clock fields ([`without_seconds`]) — the [`Planner::notes`]
+/// of a planner that records one plan per episode; `None` before a plan was made.
+pub fn plan_notes<T: serde::Serialize>(info: Option<&T>) -> Option<serde_json::Value> {
+    let plan = serde_json::to_value(info?).ok()?;
+    Some(without_seconds(serde_json::json!({ "plan": plan })))
+}
+
 /// `value` without its wall-clock fields: every object key named `seconds` or ending in
 /// `_seconds`, at any depth. For [`Planner::notes`] built from a planner's own records.
 pub fn without_seconds(value: serde_json::Value) -> serde_json::Value {
@@ -188,6 +202,56 @@ pub fn episode_seed(seed: u64, object_id: &str, view_space: &str, budget: Budget
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::vocab::{ExecutionMode, Family};
+
+    /// A planner that only has notes: `Some(value)`, or a panic when `None`.
+    struct Noted(Option<serde_json::Value>);
+    impl Planner for Noted {
+        fn name(&self) -> &str {
+            "noted"
+        }
+        fn family(&self) -> Family {
+            Family::Baseline
+        }
+        fn execution_mode(&self) -> ExecutionMode {
+            ExecutionMode::Iterative
+        }
+        fn params(&self) -> serde_json::Value {
+            serde_json::json!({})
+        }
+        fn reset(&mut self, _: &EpisodeContext, _: &dyn Environment) -> Result<(), PlannerError> {
+            Ok(())
+        }
+        fn act(&mut self, _: &Observation, _: &dyn Environment) -> Result<Action, PlannerError> {
+            Err(PlannerError("not played".into()))
+        }
+        fn notes(&self) -> Option<serde_json::Value> {
+            Some(self.0.clone().expect("notes that panic"))
+        }
+    }
+
+    #[test]
+    fn notes_are_read_once_and_a_panic_counts_as_none() {
+        let v = serde_json::json!({"plan": {"status": "optimal"}});
+        assert_eq!(read_notes(&Noted(Some(v.clone()))), Some(v));
+        assert_eq!(read_notes(&Noted(None)), None);
+    }
+
+    #[test]
+    fn plan_notes_wrap_the_plan_without_its_seconds() {
+        #[derive(serde::Serialize)]
+        struct Info {
+            status: &'static str,
+            plan_seconds: f64,
+            chosen: Vec<usize>,
+        }
+        let info = Info { status: "time_limit", plan_seconds: 1.25, chosen: vec![3, 1] };
+        assert_eq!(
+            plan_notes(Some(&info)),
+            Some(serde_json::json!({"plan": {"status": "time_limit", "chosen": [3, 1]}}))
+        );
+        assert_eq!(plan_notes::<Info>(None), None);
+    }
 
     #[test]
     fn without_seconds_drops_every_wall_clock_field_at_any_depth() {

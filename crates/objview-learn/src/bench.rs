@@ -190,8 +190,9 @@ pub fn mascvp_plan_step(
         let logits = crate::mascvp_planner::SetScorer::logits(&mut scorer, &g, &visited);
         let t2 = t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let plan =
-            plan_views(&logits, 0.3, &visited, &feasible, &poses, &poses[boot], &tsp).unwrap_or_default();
+        let plan = plan_views(&logits, 0.3, &visited, &feasible, &poses, &poses[boot], &tsp)
+            .map(|p| p.views)
+            .unwrap_or_default();
         let t3 = t.elapsed().as_secs_f64();
         sizes.push(plan.len() as f64);
         a.push(t1);

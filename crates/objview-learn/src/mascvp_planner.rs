@@ -39,7 +39,7 @@ use objview_geom::Pose;
 use objview_planners::random::same_pose;
 use objview_planners::random_tsp::distance_matrix;
 use objview_planners::registry::{settings_from, settings_json, PlannerEntry};
-use objview_planners::tsp::{shortest_open_path, TspSettings};
+use objview_planners::tsp::{shortest_open_path, TspResult, TspSettings};
 use objview_render::Camera;
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
@@ -185,6 +185,16 @@ pub fn bootstrap_view(poses: &[Pose], allowed: &[bool], current: &Pose) -> Optio
     best.map(|(v, _)| v)
 }
 
+/// The ordered plan of [`plan_views`] and how it was ordered.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Planned {
+    /// Tammes-128 ids in visiting order.
+    pub views: Vec<usize>,
+    /// The open-path solve (`optimal` only when proven), or why it failed — the views are then
+    /// in ascending id order.
+    pub path: Result<TspResult, String>,
+}
+
 /// The plan of the network call: decode at `gamma`, drop `visited`, keep `feasible` views that
 /// are not the current pose, order them on the exact open path from `current`. `Err` is the
 /// stop reason when nothing is left to execute (`plan_end` for an empty or already visited set,
@@ -197,7 +207,7 @@ pub fn plan_views(
     poses: &[Pose],
     current: &Pose,
     tsp: &TspSettings,
-) -> Result<Vec<usize>, StopReason> {
+) -> Result<Planned, StopReason> {
     let decoded: Vec<usize> = decode(logits, gamma)
         .into_iter()
         .filter(|&v| v < poses.len() && !visited.get(v).copied().unwrap_or(false))
@@ -213,10 +223,29 @@ pub fn plan_views(
         return Err(StopReason::CandidateExhausted);
     }
     let nodes: Vec<Pose> = std::iter::once(*current).chain(keep.iter().map(|&v| poses[v])).collect();
-    match shortest_open_path(&distance_matrix(&nodes), 0, tsp) {
-        Ok(r) => Ok(r.order[1..].iter().map(|&n| keep[n - 1]).collect()),
-        Err(_) => Ok(keep),
-    }
+    Ok(match shortest_open_path(&distance_matrix(&nodes), 0, tsp) {
+        Ok(r) => Planned { views: r.order[1..].iter().map(|&n| keep[n - 1]).collect(), path: Ok(r) },
+        Err(e) => Planned { views: keep, path: Err(e.to_string()) },
+    })
+}
+
+/// What the planner decided in an episode (its `planner_notes.plan`, without seconds).
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+pub struct ScvpPlanInfo {
+    /// The Tammes-128 view nearest to the start camera (marked visited).
+    pub nearest: Option<usize>,
+    /// The bootstrap view (`None`: none was feasible).
+    pub bootstrap: Option<usize>,
+    /// Views decoded at γ (sigmoid ≥ γ), ascending, before dropping visited or infeasible ones.
+    pub decoded: Vec<usize>,
+    /// The executed plan, in visiting order.
+    pub planned: Vec<usize>,
+    /// Its open-path solve (`optimal` only when proven), absent when nothing was ordered.
+    pub tsp: Option<TspResult>,
+    /// Why the path solve failed (the plan is then in ascending id order).
+    pub tsp_error: Option<String>,
+    /// The stop the network call decided instead of a plan (`plan_end`, `candidate_exhausted`).
+    pub stop: Option<String>,
 }
 
 /// The `ma-scvp` planner.
@@ -231,6 +260,7 @@ pub struct MascvpPlanner {
     calls: usize,
     plan: Vec<usize>,
     next: usize,
+    info: Option<ScvpPlanInfo>,
 }
 
 impl MascvpPlanner {
@@ -261,6 +291,7 @@ impl MascvpPlanner {
             calls: 0,
             plan: Vec::new(),
             next: 0,
+            info: None,
         }
     }
 }
@@ -281,6 +312,11 @@ impl Planner for MascvpPlanner {
                "rule": "nearest tammes-128 view visited; bootstrap to the farthest feasible view; one call; decode sigmoid >= gamma minus visited, feasible only; exact open path; plan_end / candidate_exhausted",
                "tsp_time_limit_s": self.tsp.time_limit_s, "tsp_dp_max_nodes": self.tsp.dp_max_nodes})
     }
+    /// `{"plan": ScvpPlanInfo}` without seconds: nearest and bootstrap views, the decoded set,
+    /// the executed order and its open-path solve (or why it failed), or the stop decided.
+    fn notes(&self) -> Option<Value> {
+        objview_episode::plan_notes(self.info.as_ref())
+    }
     fn reset(&mut self, ctx: &EpisodeContext, env: &dyn Environment) -> Result<(), PlannerError> {
         let r = ctx.start_pose.radius();
         let radius = if (r - objview_geom::pose::VIEW_RADIUS).abs() < 1e-9 {
@@ -296,6 +332,7 @@ impl Planner for MascvpPlanner {
         self.calls = 0;
         self.plan.clear();
         self.next = 0;
+        self.info = None;
         Ok(())
     }
     fn act(&mut self, obs: &Observation, _env: &dyn Environment) -> Result<Action, PlannerError> {
@@ -309,7 +346,14 @@ impl Planner for MascvpPlanner {
                 let allowed: Vec<bool> = (0..self.poses.len())
                     .map(|v| self.feasible[v] && !self.visited[v] && !same_pose(&self.poses[v], &obs.pose))
                     .collect();
-                match bootstrap_view(&self.poses, &allowed, &obs.pose) {
+                let boot = bootstrap_view(&self.poses, &allowed, &obs.pose);
+                self.info = Some(ScvpPlanInfo {
+                    nearest: Some(near),
+                    bootstrap: boot,
+                    stop: boot.is_none().then(|| StopReason::CandidateExhausted.to_string()),
+                    ..ScvpPlanInfo::default()
+                });
+                match boot {
                     Some(b) => {
                         self.visited[b] = true;
                         Ok(Action::move_to(&self.poses[b]))
@@ -320,7 +364,9 @@ impl Planner for MascvpPlanner {
             2 => {
                 self.grid.insert_depth(&Camera::new(obs.pose, obs.intrinsics), &obs.depth);
                 let logits = self.scorer.logits(&self.grid, &self.visited);
-                match plan_views(
+                let info = self.info.get_or_insert_with(ScvpPlanInfo::default);
+                info.decoded = decode(&logits, self.gamma);
+                let planned = plan_views(
                     &logits,
                     self.gamma,
                     &self.visited,
@@ -328,16 +374,25 @@ impl Planner for MascvpPlanner {
                     &self.poses,
                     &obs.pose,
                     &self.tsp,
-                ) {
-                    Ok(plan) => {
-                        for &v in &plan {
+                );
+                match planned {
+                    Ok(Planned { views, path }) => {
+                        for &v in &views {
                             self.visited[v] = true;
                         }
-                        self.plan = plan;
+                        info.planned = views.clone();
+                        match path {
+                            Ok(r) => info.tsp = Some(r),
+                            Err(e) => info.tsp_error = Some(e),
+                        }
+                        self.plan = views;
                         self.next = 1;
                         Ok(Action::move_to(&self.poses[self.plan[0]]))
                     }
-                    Err(reason) => Ok(Action::stop(reason)),
+                    Err(reason) => {
+                        info.stop = Some(reason.to_string());
+                        Ok(Action::stop(reason))
+                    }
                 }
             }
             _ => match self.plan.get(self.next) {
@@ -420,7 +475,10 @@ mod tests {
         feasible[31] = false;
         let current = p[60];
         let tsp = TspSettings::default();
-        let plan = plan_views(&logits, 0.3, &visited, &feasible, &p, &current, &tsp).unwrap();
+        let planned = plan_views(&logits, 0.3, &visited, &feasible, &p, &current, &tsp).unwrap();
+        let solve = planned.path.clone().expect("the open path is solved");
+        assert!(solve.optimal);
+        let plan = planned.views;
         let mut set = plan.clone();
         set.sort_unstable();
         assert_eq!(set, vec![2, 30, 77, 100]);
@@ -446,6 +504,7 @@ mod tests {
             }
         }
         assert!((len(&plan) - best).abs() < 1e-12, "{} vs brute force {best}", len(&plan));
+        assert!((solve.length - best).abs() < 1e-12 && solve.order.len() == 5, "{solve:?}");
         // Stop rules.
         assert_eq!(
             plan_views(&[-4.0; 128], 0.3, &visited, &feasible, &p, &current, &tsp),
@@ -467,7 +526,10 @@ mod tests {
         // γ = 0.5 drops what only 0.3 keeps.
         let mut g = vec![-4.0f32; 128];
         g[5] = -0.5; // sigmoid 0.378
-        assert_eq!(plan_views(&g, 0.3, &visited, &feasible, &p, &current, &tsp), Ok(vec![5]));
+        assert_eq!(
+            plan_views(&g, 0.3, &visited, &feasible, &p, &current, &tsp).map(|p| p.views),
+            Ok(vec![5])
+        );
         assert_eq!(plan_views(&g, 0.5, &visited, &feasible, &p, &current, &tsp), Err(StopReason::PlanEnd));
     }
 }

@@ -199,6 +199,19 @@ fn one_call_plan_executes_the_decoded_set_and_ends_with_plan_end() {
         moved[1..].iter().map(|m| (0..128).find(|&v| t[v].to_array() == *m).unwrap()).collect();
     rest.sort_unstable();
     assert_eq!(rest, vec![5, 40, 90], "visited and bootstrap views are not repeated");
+    // The result line records the decision: nearest, bootstrap, decoded set, executed order
+    // and its proven-shortest open path (no seconds).
+    let plan = &r.planner_notes.as_ref().expect("planner notes")["plan"];
+    assert_eq!(plan["nearest"], near);
+    assert_eq!(plan["bootstrap"], boot);
+    let mut decoded = vec![5usize, 40, 90, near, boot];
+    decoded.sort_unstable();
+    assert_eq!(plan["decoded"], serde_json::json!(decoded));
+    let order: Vec<usize> =
+        moved[1..].iter().map(|m| (0..128).find(|&v| t[v].to_array() == *m).unwrap()).collect();
+    assert_eq!(plan["planned"], serde_json::json!(order));
+    assert_eq!(plan["tsp"]["optimal"], true);
+    assert!(plan["tsp"].get("seconds").is_none() && plan["stop"].is_null() && plan["tsp_error"].is_null());
 }
 
 #[test]
@@ -207,6 +220,11 @@ fn empty_decoded_set_ends_after_the_bootstrap() {
     assert_eq!(r.terminal_reason, "plan_end");
     assert_eq!(calls.len(), 1);
     assert_eq!(r.visited_poses.len(), 2, "start + bootstrap");
+    let plan = &r.planner_notes.as_ref().expect("planner notes")["plan"];
+    assert_eq!(
+        (plan["stop"].as_str(), plan["planned"].as_array().map(Vec::len)),
+        (Some("plan_end"), Some(0))
+    );
 }
 
 #[test]
@@ -221,4 +239,6 @@ fn all_infeasible_decoded_views_stop_with_candidate_exhausted() {
     assert_eq!(calls.len(), 1);
     assert_eq!(r.visited_poses.len(), 2);
     assert_eq!(r.visited_poses[1], t[boot].to_array());
+    let plan = &r.planner_notes.as_ref().expect("planner notes")["plan"];
+    assert_eq!(plan["stop"], "candidate_exhausted");
 }

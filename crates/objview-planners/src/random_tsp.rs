@@ -151,8 +151,7 @@ impl Planner for RandomTsp {
     /// `{"plan": PlanInfo}` without its seconds: the drawn views and the open-path solve
     /// (`optimal` only when proven, with its lower bound).
     fn notes(&self) -> Option<serde_json::Value> {
-        let plan = serde_json::to_value(self.info.as_ref()?).ok()?;
-        Some(objview_episode::without_seconds(serde_json::json!({ "plan": plan })))
+        objview_episode::plan_notes(self.info.as_ref())
     }
 
     fn reset(&mut self, ctx: &EpisodeContext, env: &dyn Environment) -> Result<(), PlannerError> {

@@ -564,6 +564,10 @@ pub fn solver_summary(episodes: &[Episode]) -> Vec<SolverRow> {
             if tsp.get("optimal").and_then(|o| o.as_bool()) != Some(true) {
                 r.paths_not_proven += 1;
             }
+        } else if plan.get("tsp_error").is_some_and(|e| !e.is_null()) {
+            // A path solve that failed (the plan kept another order): not proven shortest.
+            r.paths += 1;
+            r.paths_not_proven += 1;
         }
     }
     rows.into_values().collect()
@@ -659,15 +663,29 @@ mod tests {
         e.result.planner_notes = Some(serde_json::json!({"plan": {"tsp": {"optimal": true}}}));
         eps.push(e);
         eps.push(episode(&Spec::new("a", "rse")));
+        // ma-scvp: one plan on a proven path, one whose path solve failed (kept in id order).
+        for (uid, notes) in [
+            ("a", serde_json::json!({"plan": {"tsp": {"optimal": true}, "tsp_error": null}})),
+            ("b", serde_json::json!({"plan": {"tsp": null, "tsp_error": "ILP failed"}})),
+        ] {
+            let mut e = episode(&Spec::new(uid, "ma-scvp"));
+            e.result.planner_notes = Some(notes);
+            eps.push(e);
+        }
         let rows = solver_summary(&eps);
-        assert_eq!(rows.len(), 3);
+        assert_eq!(rows.len(), 4);
+        let scvp = &rows[2];
+        assert_eq!(
+            (scvp.method.as_str(), scvp.plans, scvp.paths, scvp.paths_not_proven),
+            ("ma-scvp", 2, 2, 1)
+        );
         assert_eq!((rows[1].budget.as_str(), rows[1].plans, rows[1].paths), ("30", 1, 0));
         let mcp = &rows[0];
         assert_eq!((mcp.method.as_str(), mcp.budget.as_str(), mcp.plans), ("completion-mcp[net]", "10", 3));
         assert_eq!(mcp.selection, BTreeMap::from([("optimal".into(), 1), ("time_limit".into(), 2)]));
         assert_eq!(mcp.max_gap, Some(7.0));
         assert_eq!((mcp.paths, mcp.paths_not_proven), (3, 1));
-        let tsp = &rows[2];
+        let tsp = &rows[3];
         assert_eq!(
             (tsp.method.as_str(), tsp.plans, tsp.max_gap, tsp.paths_not_proven),
             ("random-tsp", 1, None, 0)

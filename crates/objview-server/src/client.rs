@@ -480,7 +480,7 @@ pub fn run_remote(
     }
     let line = client.result(&id)?;
     // The planner's notes live on this side: added as the local run adds them (last field).
-    let notes = catch_unwind(AssertUnwindSafe(|| planner.notes())).ok().flatten();
+    let notes = objview_episode::read_notes(planner);
     let mut line = EpisodeResult::append_planner_notes(line.trim_end(), notes.as_ref())
         .map_err(|e| protocol(format!("result: {e}")))?;
     line.push('\n');

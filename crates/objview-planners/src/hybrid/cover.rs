@@ -4,15 +4,18 @@
 //! - [`set_cover`]: the fewest candidates covering every needed voxel — the exact minimum set
 //!   cover of `objview-difficulty` ([`solve_min_cover`]: reductions, LP bound, combinatorial
 //!   search, HiGHS ILP), with the planners' time limit (10 s);
-//! - [`max_coverage`]: at most B candidates covering the most needed voxels — a HiGHS ILP
+//! - [`max_coverage`]: at most B candidates covering the most needed voxels. Two exact
+//!   shortcuts first: a selection covering every reachable element is optimal (nothing can
+//!   cover more), so when the greedy selection is one, or the exact set cover (on a share of the
+//!   time limit) finds a cover of at most B columns, that is the answer — the common case at
+//!   large budgets (K = 30). Otherwise the exact branch and bound of `coverage_search`
+//!   (submodular gain bound, deterministic; it proves the K = 5 plans in well under a second)
+//!   on half the time left (at most 2 s), and if it has not finished, a HiGHS ILP warm-started from its
+//!   incumbent for the rest:
 //!   `max Σ w_g y_g  s.t.  Σ x_i ≤ B,  y_g ≤ Σ_{i covers g} x_i,  x binary,  y ∈ [0, 1]`, where
 //!   elements covered by exactly the same candidates are merged into one group g of weight w_g
 //!   (an exact reduction; y needs no integrality: for binary x the optimum has y_g =
-//!   min(1, Σ x_i)). Warm-started from the greedy selection. Before the ILP, two exact
-//!   shortcuts: a selection covering every reachable element is optimal (nothing can cover
-//!   more), so when the greedy selection is one, or the exact set cover (on a share of the time
-//!   limit) finds a cover of at most B columns, that is the answer — the common case at large
-//!   budgets (K = 30), where the ILP would spend its time proving the bound it already meets;
+//!   min(1, Σ x_i)). The reported bound is the smaller of the two solvers' proven bounds;
 //! - [`farthest_fill`]: the budget fill, farthest-point sampling over candidate positions.
 //!
 //! Status semantics, as everywhere in the workspace: a solve is `optimal` only when proven; a
@@ -26,6 +29,7 @@ use highs::{ColProblem, HighsModelStatus, HighsSolutionStatus, Sense};
 use objview_difficulty::ilp::{highs_lock, solve_min_cover, CoverSettings, CoverStatus};
 use serde::{Deserialize, Serialize};
 
+use super::coverage_search::search_max_coverage;
 use super::steps::bit;
 
 /// Default wall-clock limit of the planners' ILPs (the reference's 10 s).
@@ -36,6 +40,13 @@ pub const DEFAULT_ILP_TIME_LIMIT_S: f64 = 10.0;
 pub const FULL_COVER_SHARE: f64 = 0.2;
 /// See [`FULL_COVER_SHARE`].
 pub const FULL_COVER_MAX_S: f64 = 2.0;
+/// Max coverage runs its exact branch and bound on this share of the time left (at most
+/// [`SEARCH_MAX_S`]); a search that has not finished by then hands its incumbent to the HiGHS
+/// ILP for the rest. The search proves small budgets (K = 5) in well under a second or not at
+/// all in useful time; at large budgets below full coverage the ILP's LP bound does better.
+pub const SEARCH_SHARE: f64 = 0.5;
+/// See [`SEARCH_SHARE`].
+pub const SEARCH_MAX_S: f64 = 2.0;
 
 /// What an exact selection step returned.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -163,6 +174,18 @@ fn greedy_max_coverage(cols: &[Vec<usize>], weights: &[f64], budget: usize) -> V
 /// `time_limit_s` (see the module docs for the model). Nothing needed or `budget` 0 →
 /// `skipped` with nothing chosen.
 pub fn max_coverage(covers: &[Vec<u64>], needed: &[u64], budget: usize, time_limit_s: f64) -> Selection {
+    max_coverage_in(covers, needed, budget, time_limit_s, SEARCH_SHARE)
+}
+
+/// [`max_coverage`] with the branch and bound's share of the time left as a parameter (tests
+/// run the ILP fallback with share 0).
+fn max_coverage_in(
+    covers: &[Vec<u64>],
+    needed: &[u64],
+    budget: usize,
+    time_limit_s: f64,
+    search_share: f64,
+) -> Selection {
     let t = Instant::now();
     let views = masked(covers, needed);
     // Group the needed elements by the set of columns covering them.
@@ -224,26 +247,63 @@ pub fn max_coverage(covers: &[Vec<u64>], needed: &[u64], budget: usize, time_lim
             return full(r.best_cover, t);
         }
     }
-    let time_limit_s = (time_limit_s - t.elapsed().as_secs_f64()).max(0.0);
     // Dominated columns (group set ⊆ another kept column's; equal sets keep the smaller index)
     // are dropped: a solution using one can use its dominator instead, so the optimum stays.
     let kept = undominated(&cols, weights.len());
     let kept_cols: Vec<Vec<usize>> = kept.iter().map(|&c| cols[c].clone()).collect();
     let kept_greedy: Vec<usize> = greedy.iter().filter_map(|c| kept.binary_search(c).ok()).collect();
+    // The exact branch and bound on the reachable elements (each group a run of w_g bits).
+    let mut offsets = Vec::with_capacity(weights.len());
+    let mut total = 0usize;
+    for g in &groups {
+        offsets.push(total);
+        total += g.1;
+    }
+    let compact: Vec<Vec<u64>> = kept_cols
+        .iter()
+        .map(|col| {
+            let mut b = vec![0u64; total.div_ceil(64)];
+            for &g in col {
+                for e in offsets[g]..offsets[g] + groups[g].1 {
+                    b[e >> 6] |= 1 << (e & 63);
+                }
+            }
+            b
+        })
+        .collect();
+    let search_s = ((time_limit_s - t.elapsed().as_secs_f64()).max(0.0) * search_share).min(SEARCH_MAX_S);
+    let deadline = Instant::now() + std::time::Duration::from_secs_f64(search_s);
+    let found = search_max_coverage(&compact, budget, &kept_greedy, deadline);
+    let found_chosen: Vec<usize> = found.chosen.iter().map(|&i| kept[i]).collect();
+    if found.proven {
+        return Selection {
+            covered: value(&found_chosen),
+            chosen: found_chosen,
+            needed: reachable,
+            status: "optimal".into(),
+            bound: found.value as f64,
+            gap: 0.0,
+            seconds: t.elapsed().as_secs_f64(),
+        };
+    }
+    let incumbent: Vec<usize> = found.chosen.clone();
+    let time_limit_s = (time_limit_s - t.elapsed().as_secs_f64()).max(0.0);
     let waited = std::cell::Cell::new(0.0);
     let solved = {
         let _lock = highs_lock(&waited);
-        solve_max_coverage(&kept_cols, &weights, budget, &kept_greedy, time_limit_s)
+        solve_max_coverage(&kept_cols, &weights, budget, &incumbent, time_limit_s)
     };
     let solved = solved.map(|(status, chosen, bound)| {
         (status, chosen.map(|c| c.iter().map(|&i| kept[i]).collect::<Vec<usize>>()), bound)
     });
     let seconds = t.elapsed().as_secs_f64() - waited.get();
+    let search_bound = found.bound as f64;
     let mut sel = match solved {
         Ok((status, chosen, bound)) => {
-            let chosen = chosen.filter(|c| value(c) >= value(&greedy)).unwrap_or_else(|| greedy.clone());
+            let chosen = chosen.filter(|c| value(c) > found.value).unwrap_or_else(|| found_chosen.clone());
             let covered = value(&chosen);
-            let bound = bound.unwrap_or(reachable as f64).min(reachable as f64).max(covered as f64);
+            let bound =
+                bound.unwrap_or(reachable as f64).min(search_bound).min(reachable as f64).max(covered as f64);
             let status = match status {
                 HighsModelStatus::Optimal => "optimal".to_string(),
                 HighsModelStatus::ReachedTimeLimit => "time_limit".to_string(),
@@ -252,11 +312,11 @@ pub fn max_coverage(covers: &[Vec<u64>], needed: &[u64], budget: usize, time_lim
             Selection { chosen, covered, needed: reachable, status, bound, gap: 0.0, seconds }
         }
         Err(message) => Selection {
-            covered: value(&greedy),
-            chosen: greedy.clone(),
+            covered: value(&found_chosen),
+            chosen: found_chosen.clone(),
             needed: reachable,
             status: format!("error: {message}"),
-            bound: reachable as f64,
+            bound: search_bound,
             gap: 0.0,
             seconds,
         },
@@ -469,6 +529,35 @@ mod tests {
                 assert_eq!(best, 0, "trial {trial}");
             }
         }
+    }
+
+    #[test]
+    fn a_stopped_search_hands_over_to_the_ilp() {
+        // With a search share of 0 the branch and bound stops at its root, and the HiGHS ILP (warm-started from its incumbent)
+        // must still reach the brute-force optimum.
+        let mut rng = ChaCha8Rng::seed_from_u64(13);
+        let mut handed_over = 0;
+        for trial in 0..12 {
+            let (n, m) = (rng.gen_range(12..=14), rng.gen_range(60..=120));
+            let p = rng.gen_range(0.1..0.3);
+            let covers = random_instance(&mut rng, n, m, p);
+            let needed = random_instance(&mut rng, 1, m, 0.9).remove(0);
+            let budget = rng.gen_range(2..=4);
+            let sel = max_coverage_in(&covers, &needed, budget, 10.0, 0.0);
+            let best = subsets(&covers, &needed)
+                .into_iter()
+                .filter(|(s, _)| s.len() <= budget)
+                .map(|(_, c)| c)
+                .max()
+                .unwrap();
+            // Below full coverage neither shortcut applies, and the search stops at its root.
+            let all: Vec<usize> = (0..n).collect();
+            handed_over += usize::from(best < covered_by(&covers, &all, &needed));
+            assert_eq!((sel.covered, sel.status.as_str()), (best, "optimal"), "trial {trial}: {sel:?}");
+            assert_eq!((sel.bound, sel.gap), (best as f64, 0.0), "trial {trial}");
+            assert!(sel.chosen.len() <= budget);
+        }
+        assert!(handed_over >= 6, "only {handed_over} of 12 instances reached the ILP");
     }
 
     #[test]

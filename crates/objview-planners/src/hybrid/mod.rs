@@ -21,6 +21,7 @@
 
 pub mod completion;
 pub mod cover;
+mod coverage_search;
 pub mod hpr;
 pub mod nbv;
 pub mod plan;

@@ -332,8 +332,7 @@ impl Planner for CompletionPlan {
     /// status (`optimal` only when proven, `time_limit` with its incumbent), bound and gap, the
     /// sizes the plan was made on, the fill and the path solve.
     fn notes(&self) -> Option<serde_json::Value> {
-        let plan = serde_json::to_value(self.info.as_ref()?).ok()?;
-        Some(objview_episode::without_seconds(serde_json::json!({ "plan": plan })))
+        objview_episode::plan_notes(self.info.as_ref())
     }
     fn reset(&mut self, ctx: &EpisodeContext, env: &dyn Environment) -> Result<(), PlannerError> {
         self.budget = match (self.kind, ctx.budget) {

@@ -473,6 +473,11 @@ mod tests {
             .collect()
     }
 
+    /// The most needed elements any ≤ `budget` columns cover (brute force).
+    fn best_within(covers: &[Vec<u64>], needed: &[u64], budget: usize) -> usize {
+        subsets(covers, needed).into_iter().filter(|(s, _)| s.len() <= budget).map(|(_, c)| c).max().unwrap()
+    }
+
     #[test]
     fn set_cover_matches_brute_force() {
         let mut rng = ChaCha8Rng::seed_from_u64(11);
@@ -514,12 +519,7 @@ mod tests {
             let needed = random_instance(&mut rng, 1, m, 0.7).remove(0);
             let budget = rng.gen_range(0..=n + 1);
             let sel = max_coverage(&covers, &needed, budget, 10.0);
-            let best = subsets(&covers, &needed)
-                .into_iter()
-                .filter(|(s, _)| s.len() <= budget)
-                .map(|(_, c)| c)
-                .max()
-                .unwrap();
+            let best = best_within(&covers, &needed, budget);
             assert!(sel.chosen.len() <= budget, "trial {trial}");
             assert_eq!(sel.covered, best, "trial {trial}: {sel:?}");
             if sel.status != "skipped" {
@@ -533,8 +533,8 @@ mod tests {
 
     #[test]
     fn a_stopped_search_hands_over_to_the_ilp() {
-        // With a search share of 0 the branch and bound stops at its root, and the HiGHS ILP (warm-started from its incumbent)
-        // must still reach the brute-force optimum.
+        // With a search share of 0 the branch and bound stops at its root, and the HiGHS ILP
+        // (warm-started from its incumbent) must still reach the brute-force optimum.
         let mut rng = ChaCha8Rng::seed_from_u64(13);
         let mut handed_over = 0;
         for trial in 0..12 {
@@ -544,12 +544,7 @@ mod tests {
             let needed = random_instance(&mut rng, 1, m, 0.9).remove(0);
             let budget = rng.gen_range(2..=4);
             let sel = max_coverage_in(&covers, &needed, budget, 10.0, 0.0);
-            let best = subsets(&covers, &needed)
-                .into_iter()
-                .filter(|(s, _)| s.len() <= budget)
-                .map(|(_, c)| c)
-                .max()
-                .unwrap();
+            let best = best_within(&covers, &needed, budget);
             // Below full coverage neither shortcut applies, and the search stops at its root.
             let all: Vec<usize> = (0..n).collect();
             handed_over += usize::from(best < covered_by(&covers, &all, &needed));

@@ -208,8 +208,21 @@ pub fn plan_views(
     current: &Pose,
     tsp: &TspSettings,
 ) -> Result<Planned, StopReason> {
-    let decoded: Vec<usize> = decode(logits, gamma)
-        .into_iter()
+    plan_decoded(&decode(logits, gamma), visited, feasible, poses, current, tsp)
+}
+
+/// [`plan_views`] on an already decoded set (ascending Tammes-128 ids with sigmoid ≥ γ).
+pub fn plan_decoded(
+    decoded: &[usize],
+    visited: &[bool],
+    feasible: &[bool],
+    poses: &[Pose],
+    current: &Pose,
+    tsp: &TspSettings,
+) -> Result<Planned, StopReason> {
+    let decoded: Vec<usize> = decoded
+        .iter()
+        .copied()
         .filter(|&v| v < poses.len() && !visited.get(v).copied().unwrap_or(false))
         .collect();
     if decoded.is_empty() {
@@ -366,9 +379,8 @@ impl Planner for MascvpPlanner {
                 let logits = self.scorer.logits(&self.grid, &self.visited);
                 let info = self.info.get_or_insert_with(ScvpPlanInfo::default);
                 info.decoded = decode(&logits, self.gamma);
-                let planned = plan_views(
-                    &logits,
-                    self.gamma,
+                let planned = plan_decoded(
+                    &info.decoded,
                     &self.visited,
                     &self.feasible,
                     &self.poses,

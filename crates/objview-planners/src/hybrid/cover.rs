@@ -228,23 +228,23 @@ fn max_coverage_in(
     // exceed it), so a full cover within the budget needs no ILP: the greedy selection when it
     // is one, else a set cover of size ≤ budget found (or excluded) by the exact cover search
     // on part of the time limit.
-    let full = |chosen: Vec<usize>, t: Instant| Selection {
-        covered: reachable,
+    let optimal = |chosen: Vec<usize>, covered: usize, t: Instant| Selection {
+        covered,
         chosen,
         needed: reachable,
         status: "optimal".into(),
-        bound: reachable as f64,
+        bound: covered as f64,
         gap: 0.0,
         seconds: t.elapsed().as_secs_f64(),
     };
     if value(&greedy) == reachable {
-        return full(greedy, t);
+        return optimal(greedy, reachable, t);
     }
     let cover_limit = (time_limit_s * FULL_COVER_SHARE).min(FULL_COVER_MAX_S);
     let settings = CoverSettings { time_limit_s: cover_limit, ..CoverSettings::default() };
     if let Ok(r) = solve_min_cover(&views, &settings) {
         if !r.best_cover.is_empty() && r.best_cover.len() <= budget && value(&r.best_cover) == reachable {
-            return full(r.best_cover, t);
+            return optimal(r.best_cover, reachable, t);
         }
     }
     // Dominated columns (group set ⊆ another kept column's; equal sets keep the smaller index)
@@ -276,22 +276,14 @@ fn max_coverage_in(
     let found = search_max_coverage(&compact, budget, &kept_greedy, deadline);
     let found_chosen: Vec<usize> = found.chosen.iter().map(|&i| kept[i]).collect();
     if found.proven {
-        return Selection {
-            covered: value(&found_chosen),
-            chosen: found_chosen,
-            needed: reachable,
-            status: "optimal".into(),
-            bound: found.value as f64,
-            gap: 0.0,
-            seconds: t.elapsed().as_secs_f64(),
-        };
+        let covered = value(&found_chosen);
+        return optimal(found_chosen, covered, t);
     }
-    let incumbent: Vec<usize> = found.chosen.clone();
     let time_limit_s = (time_limit_s - t.elapsed().as_secs_f64()).max(0.0);
     let waited = std::cell::Cell::new(0.0);
     let solved = {
         let _lock = highs_lock(&waited);
-        solve_max_coverage(&kept_cols, &weights, budget, &incumbent, time_limit_s)
+        solve_max_coverage(&kept_cols, &weights, budget, &found.chosen, time_limit_s)
     };
     let solved = solved.map(|(status, chosen, bound)| {
         (status, chosen.map(|c| c.iter().map(|&i| kept[i]).collect::<Vec<usize>>()), bound)

@@ -42,6 +42,17 @@ fn gain(col: &[u64], covered: &[u64]) -> usize {
     col.iter().zip(covered).map(|(a, b)| (a & !b).count_ones() as usize).sum()
 }
 
+/// Elements the columns `chosen` of `cols` cover together.
+fn covered_count(cols: &[Vec<u64>], chosen: impl IntoIterator<Item = usize>) -> usize {
+    let mut union = vec![0u64; cols.first().map_or(0, Vec::len)];
+    for c in chosen {
+        for (w, x) in union.iter_mut().zip(&cols[c]) {
+            *w |= x;
+        }
+    }
+    union.iter().map(|w| w.count_ones() as usize).sum()
+}
+
 struct Search<'a> {
     cols: &'a [Vec<u64>],
     best_value: usize,
@@ -102,6 +113,10 @@ impl Search<'_> {
             }
             return;
         }
+        if r == 0 {
+            self.improve(value, None);
+            return;
+        }
         let mut gains: Vec<(usize, usize)> = cands
             .iter()
             .filter_map(|&c| {
@@ -109,7 +124,7 @@ impl Search<'_> {
                 (g > 0).then_some((g, c))
             })
             .collect();
-        if r == 0 || gains.is_empty() {
+        if gains.is_empty() {
             self.improve(value, None);
             return;
         }
@@ -168,20 +183,8 @@ pub(crate) fn search_max_coverage(
     deadline: Instant,
 ) -> SearchOutcome {
     let words = cols.first().map_or(0, Vec::len);
-    let mut start_cover = vec![0u64; words];
-    for &c in start {
-        for (w, x) in start_cover.iter_mut().zip(&cols[c]) {
-            *w |= x;
-        }
-    }
-    let start_value = start_cover.iter().map(|w| w.count_ones() as usize).sum();
-    let mut reach = vec![0u64; words];
-    for c in cols {
-        for (w, x) in reach.iter_mut().zip(c) {
-            *w |= x;
-        }
-    }
-    let reachable: usize = reach.iter().map(|w| w.count_ones() as usize).sum();
+    let start_value = covered_count(cols, start.iter().copied());
+    let reachable = covered_count(cols, 0..cols.len());
     let mut s = Search {
         cols,
         best_value: start_value,
@@ -210,13 +213,7 @@ mod tests {
     use std::time::Duration;
 
     fn value(cols: &[Vec<u64>], chosen: &[usize]) -> usize {
-        let mut u = vec![0u64; cols[0].len()];
-        for &c in chosen {
-            for (w, x) in u.iter_mut().zip(&cols[c]) {
-                *w |= x;
-            }
-        }
-        u.iter().map(|w| w.count_ones() as usize).sum()
+        covered_count(cols, chosen.iter().copied())
     }
 
     /// The best value over every selection of at most `budget` columns.

@@ -4,6 +4,7 @@
 //! Lookups are two array reads, which keeps per-step fusion and nearest-neighbour updates cheap.
 
 use crate::fusion::FusedCloud;
+use objview_geom::num::floor_i32;
 
 /// Fine voxels per block edge, as a shift (8 = 1 << 3).
 pub const BLOCK_SHIFT: i32 = 3;
@@ -31,8 +32,8 @@ impl Domain {
         let mut lo = [0; 3];
         let mut dims = [0; 3];
         for a in 0..3 {
-            let k0 = ((min[a] - margin) / h).floor() as i32 >> BLOCK_SHIFT;
-            let k1 = ((max[a] + margin) / h).floor() as i32 >> BLOCK_SHIFT;
+            let k0 = floor_i32((min[a] - margin) / h) >> BLOCK_SHIFT;
+            let k1 = floor_i32((max[a] + margin) / h) >> BLOCK_SHIFT;
             lo[a] = k0;
             dims[a] = k1 - k0 + 1;
         }
@@ -44,10 +45,10 @@ impl Domain {
         (self.dims[0] * self.dims[1] * self.dims[2]) as usize
     }
 
-    /// Fine voxel key of a point.
+    /// Fine voxel key of a point: `floor(p / h)` per axis (true division; the libm-free floor).
     #[inline]
     pub fn key(&self, p: [f64; 3]) -> [i32; 3] {
-        [(p[0] / self.h).floor() as i32, (p[1] / self.h).floor() as i32, (p[2] / self.h).floor() as i32]
+        [floor_i32(p[0] / self.h), floor_i32(p[1] / self.h), floor_i32(p[2] / self.h)]
     }
 
     /// Index of the block with block key `b`, if inside the domain.

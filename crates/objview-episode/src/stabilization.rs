@@ -6,6 +6,7 @@
 //! creation: the δ-voxel of the fine voxel's centre, which for δ a multiple of the fine size
 //! (0.01, 0.02, 0.03 of 0.005) is exactly the δ-voxel of every point inside it.
 
+use objview_geom::num::floor_i32;
 use rustc_hash::FxHashSet;
 
 /// The stabilization rule for one δ.
@@ -49,7 +50,7 @@ impl Stabilization {
             let d = match self.ratio {
                 Some(m) => [k[0].div_euclid(m), k[1].div_euclid(m), k[2].div_euclid(m)],
                 None => {
-                    let c = |x: i32| (((x as f64 + 0.5) * self.h) / self.delta).floor() as i32;
+                    let c = |x: i32| floor_i32(((x as f64 + 0.5) * self.h) / self.delta);
                     [c(k[0]), c(k[1]), c(k[2])]
                 }
             };

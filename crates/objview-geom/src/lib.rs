@@ -25,6 +25,7 @@ pub mod cloud;
 pub mod io;
 pub mod normalize;
 pub mod npy;
+pub mod num;
 pub mod synth;
 #[cfg(test)]
 pub(crate) mod test_support;

@@ -19,15 +19,7 @@ pub fn key_of(p: [f64; 3], r: f64) -> VoxelKey {
     [floor_i32(p[0] / r), floor_i32(p[1] / r), floor_i32(p[2] / r)]
 }
 
-/// `q.floor()` as an i32 (saturating, NaN → 0), without the libm call that `f64::floor`
-/// becomes on baseline x86-64 (no SSE4.1 `roundsd`): truncate, then step down if truncation
-/// rounded a negative non-integer up.
-#[inline]
-pub(crate) fn floor_i32(q: f64) -> i32 {
-    let t = q as i64;
-    let f = if (t as f64) > q { t - 1 } else { t };
-    f.clamp(i32::MIN as i64, i32::MAX as i64) as i32
-}
+pub(crate) use objview_geom::num::floor_i32;
 
 /// The object-frame centre `(k + ½)·r` of voxel `k` at resolution `r`.
 #[inline]
@@ -46,16 +38,6 @@ mod tests {
         assert_eq!(key_of([-1e-12, 1e-12, 0.019_999_999], r), [-1, 0, 0]);
         assert_eq!(key_of([0.04, -0.04, 1.0], r), [2, -2, 50]);
         assert_eq!(key_of([-1.0, 0.999_999, -0.999_999], r), [-50, 49, -50]);
-    }
-
-    #[test]
-    fn fast_floor_matches_std_floor() {
-        for q in [0.0f64, -0.0, 0.5, -0.5, 1.0, -1.0, 2.999_999, -2.999_999, 1e-300, -1e-300, 3e9, -3e9] {
-            let want = q.floor().clamp(i32::MIN as f64, i32::MAX as f64) as i32;
-            assert_eq!(floor_i32(q), want, "{q}");
-        }
-        assert_eq!(floor_i32(f64::NAN), 0);
-        assert_eq!(floor_i32(-2147483648.5), i32::MIN);
     }
 
     #[test]

@@ -82,6 +82,9 @@ pub fn bench_episode(a: EpisodeBenchArgs) -> Result<()> {
         1e3 * r.checkpoint_cd.median,
         1e3 * r.checkpoint_cd.max
     );
+    let each: Vec<String> =
+        r.checkpoint_cd_each.iter().map(|(v, s)| format!("view {v}: {:.1} ms", 1e3 * s)).collect();
+    println!("  CD per checkpoint view: {}", each.join(", "));
     for p in &r.planners {
         println!(
             "{} planning per step ({} steps, all threads of the pool): median {:.1} ms, p90 {:.1} ms, max {:.1} ms",

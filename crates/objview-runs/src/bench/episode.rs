@@ -104,6 +104,9 @@ pub struct EpisodeBenchReport {
     pub checkpoint_cd: Spread,
     /// Views with a checkpoint.
     pub checkpoint_views: usize,
+    /// `(view, seconds)` of each view with a checkpoint, in view order: the first carries the
+    /// first exact distances of every ground-truth point (what a short episode pays).
+    pub checkpoint_cd_each: Vec<(usize, f64)>,
     /// Their median after the first 5 views (NaN when there are no more).
     pub engine_median_after_5: f64,
     /// Wall time of the one-thread episode.
@@ -147,7 +150,9 @@ impl EpisodeBenchReport {
             "engine_median_s": self.engine.median,
             "engine_p90_s": self.engine.p90,
             "checkpoint_cd": {"views": self.checkpoint_views, "median_s": self.checkpoint_cd.median,
-                              "max_s": self.checkpoint_cd.max},
+                              "max_s": self.checkpoint_cd.max,
+                              "each": self.checkpoint_cd_each.iter()
+                                  .map(|(v, s)| json!({"view": v, "seconds": s})).collect::<Vec<_>>()},
             "engine_all_threads": {"threads": self.threads, "median_s": self.engine_all_threads.median,
                                    "p90_s": self.engine_all_threads.p90},
             "stage_median_s": {"render": self.stages.render, "fusion": self.stages.fusion,
@@ -223,9 +228,13 @@ pub fn bench_episode(
             .collect(),
     )
     .median;
-    let checkpoint_cd = Spread::of(
-        r.steps.iter().filter(|s| at_checkpoint.contains(&s.step)).map(|s| s.stage_seconds[3]).collect(),
-    );
+    let checkpoint_cd_each: Vec<(usize, f64)> = r
+        .steps
+        .iter()
+        .filter(|s| at_checkpoint.contains(&s.step))
+        .map(|s| (s.step, s.stage_seconds[3]))
+        .collect();
+    let checkpoint_cd = Spread::of(checkpoint_cd_each.iter().map(|c| c.1).collect());
     // The far-target updates run on the rayon pool: the same episode on every thread.
     let threads = rayon::current_num_threads();
     let (r_all, engine_all_threads_episode_seconds) = engine_run(threads)?;
@@ -271,6 +280,7 @@ pub fn bench_episode(
         engine,
         checkpoint_views: at_checkpoint.len(),
         checkpoint_cd,
+        checkpoint_cd_each,
         engine_median_after_5,
         engine_episode_seconds,
         threads,
@@ -302,6 +312,11 @@ mod tests {
         }
         assert_eq!(r.engine.max, r.engine_step_seconds.iter().cloned().fold(0.0, f64::max));
         assert!(r.engine_median_after_5.is_nan(), "only 4 steps");
+        // One entry per checkpoint view, in view order, whose largest is the reported max.
+        assert!(r.checkpoint_views >= 1, "the terminal checkpoint at least");
+        assert_eq!(r.checkpoint_cd_each.len(), r.checkpoint_views);
+        assert!(r.checkpoint_cd_each.windows(2).all(|w| w[0].0 < w[1].0), "{:?}", r.checkpoint_cd_each);
+        assert_eq!(r.checkpoint_cd.max, r.checkpoint_cd_each.iter().map(|c| c.1).fold(0.0, f64::max));
         assert_eq!(
             r.planners.iter().map(|p| (p.planner.as_str(), p.steps)).collect::<Vec<_>>(),
             [("rse", 1), ("rse-mov", 1)]
@@ -323,6 +338,8 @@ mod tests {
             assert!(v.get(key).is_some(), "{key}");
         }
         assert_eq!(v["settings"]["command"], "bench episode");
+        assert_eq!(v["checkpoint_cd"]["each"].as_array().map(Vec::len), Some(r.checkpoint_views));
+        assert_eq!(v["checkpoint_cd"]["each"][0]["view"], r.checkpoint_cd_each[0].0);
         assert_eq!(v["planners"][1]["planner"], "rse-mov");
     }
 }

@@ -20,8 +20,8 @@
 
 use crate::fusion::FusedCloud;
 use crate::grid::{
-    block_of, dist2, keyed_points, local_index, nearest_in, Bucketed, ChangedBlocks, Domain, SuperGrid,
-    BLOCK, BLOCK_CELLS, NONE,
+    block_of, dist2, keyed_points, local_index, nearest_in, runs_around, Bucketed, ChangedBlocks, Domain,
+    SuperGrid, BLOCK, BLOCK_CELLS, NONE,
 };
 use rayon::prelude::*;
 
@@ -640,12 +640,42 @@ impl Bucketed for Targets {
     fn supergrid(&self) -> &SuperGrid {
         &self.ix.supergrid
     }
+    #[inline]
+    fn for_cells_around<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], mut f: F) {
+        runs_around(&self.ix.domain, k, |b, first, len| {
+            let t = self.ix.table[b];
+            if t == NONE {
+                return;
+            }
+            let starts = &self.ix.cell_start[t as usize];
+            let li = local_index(first);
+            for i in starts[li]..starts[li + len] {
+                f(i, self.ix.pts[i as usize]);
+            }
+        });
+    }
 }
 
 #[cfg(test)]
 mod nearest_tests {
     use super::*;
     use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn the_27_voxel_runs_show_what_27_cell_lookups_show() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let domain = Domain::covering(0.005, [-0.1; 3], [0.1; 3], 0.0);
+        let pts: Vec<[f64; 3]> = (0..6000).map(|_| [0; 3].map(|_: i32| rng.gen_range(-0.1..0.1))).collect();
+        let t = Targets::new(domain, &pts, f64::INFINITY).unwrap();
+        let mut shown = 0;
+        for _ in 0..3000 {
+            let k = [0; 3].map(|_: i32| rng.gen_range(-24..24));
+            let (fast, each) = crate::grid::around_both_ways(&t, k);
+            assert_eq!(fast, each, "k {k:?}");
+            shown += fast.len();
+        }
+        assert!(shown > 3000, "the cases must see points: {shown}");
+    }
 
     #[test]
     fn nearest_target_equals_brute_force() {

@@ -9,7 +9,8 @@
 //! only around them.
 
 use crate::grid::{
-    block_of, local_index, nearest_in, Bucketed, Domain, SuperGrid, SuperHandle, BLOCK_CELLS, NONE,
+    block_of, local_index, nearest_in, runs_around, Bucketed, Domain, SuperGrid, SuperHandle, BLOCK_CELLS,
+    NONE,
 };
 
 /// One allocated block: the slot of each of its fine voxels and the list of its slots.
@@ -362,13 +363,32 @@ impl Bucketed for FusedCloud {
     }
     fn for_block<F: FnMut(u32, [f64; 3])>(&self, b: [i32; 3], mut f: F) {
         if let Some(blk) = self.domain.block_index(b).and_then(|bi| self.block_at(bi)) {
-            for &s in &blk.slots {
-                f(s, self.pos[s as usize]);
+            // The block-local copy of the positions: contiguous, where `pos[s]` would be a
+            // cache miss per slot (slots of one block are scattered over the cloud).
+            for (&s, &q) in blk.slots.iter().zip(&blk.centroids) {
+                f(s, q);
             }
         }
     }
     fn supergrid(&self) -> &SuperGrid {
         &self.supergrid
+    }
+    #[inline]
+    fn for_cells_around<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], mut f: F) {
+        runs_around(&self.domain, k, |b, first, len| {
+            let t = self.table[b];
+            if t == NONE {
+                return;
+            }
+            let blk = &self.blocks[t as usize];
+            let li = local_index(first);
+            for j in li..li + len {
+                let s = blk.cells[j];
+                if s != NONE {
+                    f(s, blk.centroids[blk.local[j] as usize]);
+                }
+            }
+        });
     }
 }
 
@@ -380,6 +400,31 @@ mod tests {
 
     fn domain() -> Domain {
         Domain::covering(0.005, [-1.0; 3], [1.0; 3], 0.05)
+    }
+
+    #[test]
+    fn the_27_voxel_runs_show_what_27_cell_lookups_show() {
+        // Points on block edges and at the domain's border (negative keys, runs cut by a
+        // block boundary or by the domain), moved by later insertions (block-local positions).
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(8);
+        let mut f = FusedCloud::new(Domain::covering(0.005, [-0.1; 3], [0.1; 3], 0.0));
+        let grid = |rng: &mut rand_chacha::ChaCha8Rng| rng.gen_range(-21i32..21) as f64 * 0.005 + 0.0025;
+        for _ in 0..3 {
+            let pts: Vec<[f64; 3]> = (0..3000)
+                .map(|_| {
+                    [grid(&mut rng), grid(&mut rng), grid(&mut rng)].map(|x| x + rng.gen_range(-0.002..0.002))
+                })
+                .collect();
+            f.insert(&pts);
+        }
+        let mut shown = 0;
+        for _ in 0..3000 {
+            let k = [0; 3].map(|_: i32| rng.gen_range(-24..24));
+            let (fast, each) = crate::grid::around_both_ways(&f, k);
+            assert_eq!(fast, each, "k {k:?}");
+            shown += fast.len();
+        }
+        assert!(shown > 3000, "the cases must see points: {shown}");
     }
 
     #[test]

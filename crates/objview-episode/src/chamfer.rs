@@ -21,7 +21,7 @@
 use crate::fusion::FusedCloud;
 use crate::grid::{
     block_of, dist2, keyed_points, local_index, nearest_in, runs_around, Bucketed, ChangedBlocks, Domain,
-    SuperGrid, BLOCK, BLOCK_CELLS, NONE,
+    SuperGrid, BLOCK_CELLS, NONE,
 };
 use rayon::prelude::*;
 
@@ -56,25 +56,15 @@ impl TargetIndex {
     /// block, which are contiguous in the sorted points.
     #[inline]
     fn for_runs_around(&self, k: [i32; 3], r: i32, mut f: impl FnMut(u32, u32, u32)) {
-        for dz in -r..=r {
-            for dy in -r..=r {
-                let mut dx = -r;
-                while dx <= r {
-                    let kk = [k[0] + dx, k[1] + dy, k[2] + dz];
-                    let run_end = (dx + (BLOCK - 1 - (kk[0] & (BLOCK - 1)))).min(r);
-                    let len = (run_end - dx + 1) as usize;
-                    dx = run_end + 1;
-                    let Some(b) = self.domain.block_index(block_of(kk)) else { continue };
-                    let t = self.table[b];
-                    if t == NONE {
-                        continue;
-                    }
-                    let starts = &self.cell_start[t as usize];
-                    let li = local_index(kk);
-                    f(t, starts[li], starts[li + len]);
-                }
+        runs_around(&self.domain, k, r, |b, first, len| {
+            let t = self.table[b];
+            if t == NONE {
+                return;
             }
-        }
+            let starts = &self.cell_start[t as usize];
+            let li = local_index(first);
+            f(t, starts[li], starts[li + len]);
+        });
     }
 }
 
@@ -642,14 +632,8 @@ impl Bucketed for Targets {
     }
     #[inline]
     fn for_cells_around<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], mut f: F) {
-        runs_around(&self.ix.domain, k, |b, first, len| {
-            let t = self.ix.table[b];
-            if t == NONE {
-                return;
-            }
-            let starts = &self.ix.cell_start[t as usize];
-            let li = local_index(first);
-            for i in starts[li]..starts[li + len] {
+        self.ix.for_runs_around(k, 1, |_, lo, hi| {
+            for i in lo..hi {
                 f(i, self.ix.pts[i as usize]);
             }
         });
@@ -667,13 +651,7 @@ mod nearest_tests {
         let domain = Domain::covering(0.005, [-0.1; 3], [0.1; 3], 0.0);
         let pts: Vec<[f64; 3]> = (0..6000).map(|_| [0; 3].map(|_: i32| rng.gen_range(-0.1..0.1))).collect();
         let t = Targets::new(domain, &pts, f64::INFINITY).unwrap();
-        let mut shown = 0;
-        for _ in 0..3000 {
-            let k = [0; 3].map(|_: i32| rng.gen_range(-24..24));
-            let (fast, each) = crate::grid::around_both_ways(&t, k);
-            assert_eq!(fast, each, "k {k:?}");
-            shown += fast.len();
-        }
+        let shown = crate::grid::assert_around_matches_cells(&t, 19);
         assert!(shown > 3000, "the cases must see points: {shown}");
     }
 

@@ -115,56 +115,52 @@ pub trait Bucketed {
     /// The occupied blocks grouped by superblock (for searches that reach far).
     fn supergrid(&self) -> &SuperGrid;
     /// Calls `f(index, position)` for every point in the 27 fine voxels within one voxel of
-    /// `k` (each voxel once; the order is the store's). The default visits them one by one;
-    /// the stores override it with runs along x inside a block (one block lookup per run, and
-    /// an empty block skips its whole run).
-    #[inline]
-    fn for_cells_around<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], mut f: F) {
+    /// `k` (each voxel once; the order is the store's): runs along x inside a block
+    /// ([`runs_around`]: one block lookup per run, an empty block skips its whole run).
+    fn for_cells_around<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], f: F);
+}
+
+/// Test helper: for 3,000 random keys in [−24, 24)³, what `for_cells_around(k)` shows must be
+/// what 27 `for_cell` calls show (as sorted `(index, position bits)`); returns how many points
+/// were shown in all.
+#[cfg(test)]
+pub(crate) fn assert_around_matches_cells<S: Bucketed>(set: &S, seed: u64) -> usize {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let bits = |q: [f64; 3]| q.map(f64::to_bits);
+    let mut shown = 0;
+    for _ in 0..3000 {
+        let k = [0; 3].map(|_: i32| rng.gen_range(-24..24));
+        let mut fast = Vec::new();
+        set.for_cells_around(k, |i, q| fast.push((i, bits(q))));
+        let mut each = Vec::new();
         for dz in -1..=1 {
             for dy in -1..=1 {
                 for dx in -1..=1 {
-                    self.for_cell([k[0] + dx, k[1] + dy, k[2] + dz], &mut f);
+                    set.for_cell([k[0] + dx, k[1] + dy, k[2] + dz], |i, q| each.push((i, bits(q))));
                 }
             }
         }
+        fast.sort_unstable();
+        each.sort_unstable();
+        assert_eq!(fast, each, "k {k:?}");
+        shown += fast.len();
     }
+    shown
 }
 
-/// Points shown by a lookup, as sorted `(index, position bits)`.
-#[cfg(test)]
-pub(crate) type Shown = Vec<(u32, [u64; 3])>;
-
-/// Test helper: what `for_cells_around(k)` shows, and what 27 `for_cell` calls show, each as
-/// sorted `(index, position bits)`.
-#[cfg(test)]
-pub(crate) fn around_both_ways<S: Bucketed>(set: &S, k: [i32; 3]) -> (Shown, Shown) {
-    let bits = |q: [f64; 3]| q.map(f64::to_bits);
-    let mut fast = Vec::new();
-    set.for_cells_around(k, |i, q| fast.push((i, bits(q))));
-    let mut each = Vec::new();
-    for dz in -1..=1 {
-        for dy in -1..=1 {
-            for dx in -1..=1 {
-                set.for_cell([k[0] + dx, k[1] + dy, k[2] + dz], |i, q| each.push((i, bits(q))));
-            }
-        }
-    }
-    fast.sort_unstable();
-    each.sort_unstable();
-    (fast, each)
-}
-
-/// Calls `f(block index, first key, len)` for the runs of the 27 fine voxels within one voxel
-/// of `k`: per (z, y) row, the x-runs that stay inside one block (`len` voxels from the first,
-/// consecutive local indices), skipping runs whose block lies outside `domain`.
+/// Calls `f(block index, first key, len)` for the runs of the fine voxels within `r` (per
+/// axis) of voxel `k`: per (z, y) row, the x-runs that stay inside one block (`len` voxels
+/// from the first, consecutive local indices), skipping runs whose block lies outside
+/// `domain`.
 #[inline]
-pub(crate) fn runs_around(domain: &Domain, k: [i32; 3], mut f: impl FnMut(usize, [i32; 3], usize)) {
-    for dz in -1..=1 {
-        for dy in -1..=1 {
-            let mut x = k[0] - 1;
-            while x <= k[0] + 1 {
+pub(crate) fn runs_around(domain: &Domain, k: [i32; 3], r: i32, mut f: impl FnMut(usize, [i32; 3], usize)) {
+    for dz in -r..=r {
+        for dy in -r..=r {
+            let mut x = k[0] - r;
+            while x <= k[0] + r {
                 // The last x of x's block (two's complement: also right for negative x).
-                let end = (x | (BLOCK - 1)).min(k[0] + 1);
+                let end = (x | (BLOCK - 1)).min(k[0] + r);
                 let kk = [x, k[1] + dy, k[2] + dz];
                 if let Some(b) = domain.block_index(block_of(kk)) {
                     f(b, kk, (end - x + 1) as usize);

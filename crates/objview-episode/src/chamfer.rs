@@ -16,24 +16,30 @@
 //!   is the answer whenever it is no larger than that; otherwise (and for near targets whose
 //!   slot moved away) a full nearest search runs, bounded by the moved slot's new distance.
 //!
+//! Targets with no nearest slot yet are searched target block by target block
+//! ([`nearest_in_block`]: the block's first answer bounds the others, and the fused blocks that
+//! could beat those bounds are gathered once for the whole block).
+//!
+//! When at least half of the fused slots changed since the previous update (the first update
+//! of an episode, a checkpoint after many views) the update *pulls* instead: every target's
+//! distance and every changed slot's distance to the targets is searched again, block by
+//! block. The distances are the same either way (a tie between two slots at exactly the same
+//! distance may name a different slot); pulling is cheaper there because it never re-examines a
+//! target once per changed slot around it, and it keeps far targets (never-seen inner surfaces)
+//! cheap.
+//!
 //! With a cap, distances at or above the cap are stored as +∞ and searches are bounded by it.
 
 use crate::fusion::FusedCloud;
 use crate::grid::{
-    block_of, dist2, keyed_points, local_index, nearest_in, runs_around, Bucketed, ChangedBlocks, Domain,
-    SuperGrid, BLOCK_CELLS, NONE,
+    block_of, dist2, keyed_points, local_index, nearest_in, nearest_in_block, runs_around, BlockSearch,
+    Bucketed, ChangedBlocks, Domain, SuperGrid, BLOCK_CELLS, NONE,
 };
 use rayon::prelude::*;
 
-/// Targets searched one after another with the previous answer as a bound (see
-/// [`Targets::update`]).
-const FRESH_RUN: usize = 256;
-
-/// The next f64 above a finite `d ≥ 0` (`f64::next_up`, which needs Rust 1.86).
-fn above(d: f64) -> f64 {
-    debug_assert!(d >= 0.0 && d.is_finite());
-    f64::from_bits(d.to_bits() + 1)
-}
+/// [`Targets::update`] searches every distance again when at least one slot in `PULL_SHARE`
+/// changed since the previous update.
+const PULL_SHARE: usize = 2;
 
 /// The immutable spatial index of a target set, shared (behind an `Arc`) by every episode
 /// on the same scene: building it sorts every point, which is most of an episode's set-up.
@@ -51,6 +57,12 @@ struct TargetIndex {
 }
 
 impl TargetIndex {
+    /// The index range of the targets in target block `t`.
+    fn block_range(&self, t: u32) -> std::ops::Range<usize> {
+        let s = &self.cell_start[t as usize];
+        s[0] as usize..s[BLOCK_CELLS] as usize
+    }
+
     /// Calls `f(target block, first, end)` with the index range of the targets in the fine
     /// voxels within `r` (per axis) of voxel `k`: runs of consecutive voxels along x within one
     /// block, which are contiguous in the sorted points.
@@ -189,6 +201,18 @@ impl Targets {
     /// Returns, per changed slot, the squared distance to the nearest target (the fused→target
     /// distance, which the push finds for free within h; a full search otherwise).
     pub fn update(&mut self, fused: &FusedCloud, changed: &[u32]) -> Vec<f64> {
+        // Where most slots changed (the first update, a checkpoint after many views), every
+        // distance is searched again; otherwise the changes are pushed to the targets near them.
+        let pull = changed.len().saturating_mul(PULL_SHARE) >= fused.len();
+        self.update_by(fused, changed, pull)
+    }
+
+    /// [`Targets::update`] by a full search of every distance (`pull`) or by pushing the
+    /// changed slots (the same distances either way).
+    fn update_by(&mut self, fused: &FusedCloud, changed: &[u32], pull: bool) -> Vec<f64> {
+        if pull {
+            return self.pull(fused, changed);
+        }
         self.epoch += 1;
         let h2 = self.ix.domain.h * self.ix.domain.h;
         let mut recompute: Vec<u32> = Vec::new();
@@ -240,32 +264,25 @@ impl Targets {
             .into_iter()
             .partition(|&i| self.nn[i as usize] == NONE && self.mark[i as usize] != self.epoch);
         if !fresh.is_empty() && !changed.is_empty() {
+            // One batched search per target block (`fresh` is in voxel order, so a block's
+            // targets are consecutive): the block's first answer bounds the others, and the
+            // fused blocks that could beat those bounds are gathered once for all of them.
+            let spans = self.block_spans(&fresh);
             let this = &*self;
-            // In runs of neighbouring targets (`fresh` is in voxel order), the previous
-            // target's nearest slot bounds the search of the next from the start, which
-            // prunes most blocks a search from ∞ would visit. The bound admits the hint itself
-            // (d² ≤ its distance), so the answer is the exact nearest distance either way; the
-            // runs are fixed-size, so the result does not depend on the thread count.
-            let found: Vec<(f64, u32)> = fresh
-                .par_chunks(FRESH_RUN)
-                .flat_map_iter(|run| {
-                    let mut hint = NONE;
-                    run.iter().map(move |&i| {
-                        let p = this.ix.pts[i as usize];
-                        let bound = if hint == NONE {
-                            this.cap2
-                        } else {
-                            above(dist2(p, fused.pos[hint as usize])).min(this.cap2)
-                        };
-                        let found = fused.nearest(p, bound);
-                        if found.1 != NONE {
-                            hint = found.1;
-                        }
-                        found
-                    })
-                })
+            let found: Vec<Vec<(f64, u32)>> = spans
+                .par_iter()
+                .map_init(
+                    || (BlockSearch::default(), Vec::new()),
+                    |(scratch, pts), &(s, e)| {
+                        pts.clear();
+                        pts.extend(fresh[s..e].iter().map(|&i| this.ix.pts[i as usize]));
+                        let mut out = Vec::with_capacity(e - s);
+                        nearest_in_block(fused, pts, this.cap2, scratch, &mut out);
+                        out
+                    },
+                )
                 .collect();
-            for (&i, &(d, s)) in fresh.iter().zip(&found) {
+            for (&i, &(d, s)) in fresh.iter().zip(found.iter().flatten()) {
                 if s != NONE {
                     self.d2[i as usize] = d;
                     self.nn[i as usize] = s;
@@ -275,22 +292,14 @@ impl Targets {
         if !far.is_empty() && !changed.is_empty() {
             let groups = ChangedBlocks::new(fused, changed);
             // Far targets are sorted by block: one group per target block.
-            let mut spans = Vec::new();
-            let mut start = 0;
-            while start < far.len() {
-                let tb = self.block_of_point(far[start] as usize);
-                let mut end = start + 1;
-                while end < far.len() && self.block_of_point(far[end] as usize) == tb {
-                    end += 1;
-                }
-                spans.push((start, end, tb));
-                start = end;
-            }
+            let spans = self.block_spans(&far);
             let this = &*self;
             let updates: Vec<Vec<FarUpdate>> = spans
                 .par_iter()
                 .with_min_len(8)
-                .map(|&(s, e, tb)| this.far_block(fused, &groups, &far[s..e], tb, seen))
+                .map(|&(s, e)| {
+                    this.far_block(fused, &groups, &far[s..e], this.block_of_point(far[s] as usize), seen)
+                })
                 .collect();
             for u in updates.iter().flatten() {
                 let iu = u.target as usize;
@@ -322,6 +331,77 @@ impl Targets {
             if *m > h2 {
                 *m = nearest_in(self, fused.pos[s as usize], *m).0;
             }
+        }
+        slot_min
+    }
+
+    /// Every distance searched again (see [`Targets::update`]): the targets of each target
+    /// block in one batched search of the fused cloud, and the changed slots of each block in
+    /// one batched search of the targets.
+    fn pull(&mut self, fused: &FusedCloud, changed: &[u32]) -> Vec<f64> {
+        self.epoch += 1;
+        self.seen = fused.epoch();
+        let h2 = self.ix.domain.h * self.ix.domain.h;
+        let ix = &*self.ix;
+        let cap2 = self.cap2;
+        let found: Vec<Vec<(f64, u32)>> = (0..ix.cell_start.len())
+            .into_par_iter()
+            .map_init(
+                || (BlockSearch::default(), Vec::new()),
+                |(scratch, out), t| {
+                    let r = ix.block_range(t as u32);
+                    nearest_in_block(fused, &ix.pts[r], cap2, scratch, out);
+                    out.clone()
+                },
+            )
+            .collect();
+        for (i, &(d, s)) in found.iter().flatten().enumerate() {
+            (self.d2[i], self.nn[i]) = if s == NONE { (f64::INFINITY, NONE) } else { (d, s) };
+        }
+        self.far = (0..self.d2.len() as u32).filter(|&i| self.d2[i as usize] > h2).collect();
+        // Fused → target: the changed slots grouped by the block their position lies in.
+        let mut by_block: Vec<(usize, u32)> = changed
+            .iter()
+            .enumerate()
+            .map(|(ci, &s)| {
+                let b = ix.domain.block_index(block_of(ix.domain.key(fused.pos[s as usize])));
+                (b.unwrap_or(usize::MAX), ci as u32)
+            })
+            .collect();
+        by_block.sort_unstable();
+        let mut spans = Vec::new();
+        let mut start = 0;
+        while start < by_block.len() {
+            let mut end = start + 1;
+            while end < by_block.len() && by_block[end].0 == by_block[start].0 {
+                end += 1;
+            }
+            spans.push((start, end));
+            start = end;
+        }
+        let this = &*self;
+        let near: Vec<Vec<(f64, u32)>> = spans
+            .par_iter()
+            .map_init(
+                || (BlockSearch::default(), Vec::new(), Vec::new()),
+                |(scratch, pts, out), &(a, b)| {
+                    pts.clear();
+                    pts.extend(
+                        by_block[a..b].iter().map(|&(_, ci)| fused.pos[changed[ci as usize] as usize]),
+                    );
+                    if by_block[a].0 == usize::MAX {
+                        // Outside the target domain (not a block of it): one search each.
+                        pts.iter().map(|&q| nearest_in(this, q, f64::INFINITY)).collect()
+                    } else {
+                        nearest_in_block(this, pts, f64::INFINITY, scratch, out);
+                        out.clone()
+                    }
+                },
+            )
+            .collect();
+        let mut slot_min = vec![f64::INFINITY; changed.len()];
+        for (&(_, ci), &(d, _)) in by_block.iter().zip(near.iter().flatten()) {
+            slot_min[ci as usize] = d;
         }
         slot_min
     }
@@ -444,6 +524,23 @@ impl Targets {
         }
     }
 
+    /// The runs of `idx` (target indices in increasing order) that share a target block:
+    /// `(start, end)` into `idx`.
+    fn block_spans(&self, idx: &[u32]) -> Vec<(usize, usize)> {
+        let mut spans = Vec::new();
+        let mut start = 0;
+        while start < idx.len() {
+            let tb = self.block_of_point(idx[start] as usize);
+            let mut end = start + 1;
+            while end < idx.len() && self.block_of_point(idx[end] as usize) == tb {
+                end += 1;
+            }
+            spans.push((start, end));
+            start = end;
+        }
+        spans
+    }
+
     /// Target-block index of point `i` (points are sorted by block).
     fn block_of_point(&self, i: usize) -> [i32; 3] {
         block_of(self.ix.domain.key(self.ix.pts[i]))
@@ -506,11 +603,15 @@ mod tests {
         tp.extend(patch(&mut rng, 500).iter().map(|p| [p[0] * 0.5, p[1] * 0.5, p[2] * 0.5]));
         for cap in [f64::INFINITY, 0.03] {
             // Updated after every insertion, and only after every third one (as at checkpoints:
-            // the changes of several insertions at once).
+            // the changes of several insertions at once); by pushing the changes only, by
+            // searching everything again only, and by turns (each way continues the other's
+            // state), and as `update` chooses.
+            // Four target sets, one per way, follow the same fused cloud (one brute force each).
             for every in [1usize, 3] {
                 let mut fused = FusedCloud::new(domain.clone());
-                let mut t = Targets::new(domain.clone(), &tp, cap).unwrap();
-                assert_eq!(t.len(), tp.len());
+                let mut ts: Vec<Targets> =
+                    (0..4).map(|_| Targets::new(domain.clone(), &tp, cap).unwrap()).collect();
+                assert_eq!(ts[0].len(), tp.len());
                 let mut seen = 0;
                 for step in 0..9 {
                     let obs = patch(&mut rng, 6000);
@@ -520,15 +621,28 @@ mod tests {
                     }
                     let changed = fused.changed_since(seen);
                     seen = fused.epoch();
-                    let to_t = t.update(&fused, &changed);
-                    for (&s, &d) in changed.iter().zip(&to_t) {
-                        let q = fused.pos[s as usize];
-                        let b = t.points().iter().map(|&p| dist2(p, q)).fold(f64::INFINITY, f64::min);
-                        assert_eq!(d, b, "fused→target distance of slot {s}");
-                    }
-                    let want = brute(&t, &fused, cap * cap);
-                    for (i, (&a, &b)) in t.d2.iter().zip(&want).enumerate() {
-                        assert!(a == b, "cap {cap} every {every} step {step} target {i}: {a} vs brute {b}");
+                    let want = brute(&ts[0], &fused, cap * cap);
+                    let want_slot: Vec<f64> = changed
+                        .iter()
+                        .map(|&s| {
+                            let q = fused.pos[s as usize];
+                            ts[0].points().iter().map(|&p| dist2(p, q)).fold(f64::INFINITY, f64::min)
+                        })
+                        .collect();
+                    for (mode, t) in ts.iter_mut().enumerate() {
+                        let to_t = match mode {
+                            0 => t.update_by(&fused, &changed, false),
+                            1 => t.update_by(&fused, &changed, true),
+                            2 => t.update_by(&fused, &changed, step % 2 == 1),
+                            _ => t.update(&fused, &changed),
+                        };
+                        assert_eq!(to_t, want_slot, "fused→target distances, mode {mode} step {step}");
+                        for (i, (&a, &b)) in t.d2.iter().zip(&want).enumerate() {
+                            assert!(
+                                a == b,
+                                "cap {cap} every {every} mode {mode} step {step} target {i}: {a} vs brute {b}"
+                            );
+                        }
                     }
                 }
             }
@@ -595,12 +709,6 @@ impl Targets {
             });
         }
     }
-
-    /// The index range of the targets in target block `t`.
-    fn block_range(&self, t: u32) -> std::ops::Range<usize> {
-        let s = &self.ix.cell_start[t as usize];
-        s[0] as usize..s[BLOCK_CELLS] as usize
-    }
 }
 
 impl Bucketed for Targets {
@@ -622,13 +730,17 @@ impl Bucketed for Targets {
         let Some(bi) = self.ix.domain.block_index(b) else { return };
         let t = self.ix.table[bi];
         if t != NONE {
-            for i in self.block_range(t) {
+            for i in self.ix.block_range(t) {
                 f(i as u32, self.ix.pts[i]);
             }
         }
     }
     fn supergrid(&self) -> &SuperGrid {
         &self.ix.supergrid
+    }
+    #[inline]
+    fn position(&self, index: u32) -> [f64; 3] {
+        self.ix.pts[index as usize]
     }
     #[inline]
     fn for_cells_around<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], mut f: F) {

@@ -374,6 +374,10 @@ impl Bucketed for FusedCloud {
         &self.supergrid
     }
     #[inline]
+    fn position(&self, index: u32) -> [f64; 3] {
+        self.pos[index as usize]
+    }
+    #[inline]
     fn for_cells_around<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], mut f: F) {
         runs_around(&self.domain, k, 1, |b, first, len| {
             let t = self.table[b];

@@ -118,6 +118,8 @@ pub trait Bucketed {
     /// `k` (each voxel once; the order is the store's): runs along x inside a block
     /// ([`runs_around`]: one block lookup per run, an empty block skips its whole run).
     fn for_cells_around<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], f: F);
+    /// The position of point `index`.
+    fn position(&self, index: u32) -> [f64; 3];
 }
 
 /// Test helper: for 3,000 random keys in [−24, 24)³, what `for_cells_around(k)` shows must be
@@ -318,6 +320,155 @@ pub fn nearest_in<S: Bucketed>(set: &S, p: [f64; 3], bound2: f64) -> (f64, u32) 
         });
     }
     best
+}
+
+/// The next f64 above a finite `d ≥ 0` (`f64::next_up`, which needs Rust 1.86).
+#[inline]
+pub(crate) fn above(d: f64) -> f64 {
+    debug_assert!(d >= 0.0 && d.is_finite());
+    f64::from_bits(d.to_bits() + 1)
+}
+
+/// Squared distance between two boxes (0 when they touch or overlap; a lower bound of the
+/// computed `dist2` of any point of one to any point of the other: each per-axis gap is
+/// rounded no larger than the points' difference).
+#[inline]
+fn box_box_dist2(a: &Aabb, b: &Aabb) -> f64 {
+    let mut d2 = 0.0;
+    for k in 0..3 {
+        let g = (b.lo[k] - a.hi[k]).max(a.lo[k] - b.hi[k]).max(0.0);
+        d2 += g * g;
+    }
+    d2
+}
+
+/// Scratch of [`nearest_in_block`]: the candidate blocks of one group with their lower bounds.
+#[derive(Default)]
+pub struct BlockSearch {
+    cand: Vec<(f64, [i32; 3], Aabb)>,
+}
+
+/// [`nearest_in`] for every point of `pts`, which should all lie in one block of `set`'s grid
+/// (fine keys with the same [`block_of`]; otherwise each point is searched alone): `out[i]` is the nearest point of `set` to `pts[i]` with d² below `bound2`, or
+/// `(bound2, NONE)`. The same distances as one [`nearest_in`] per point (exact; among exact ties
+/// the index found may differ), for a fraction of the work when the answers lie far away: the
+/// first point's nearest neighbour `q₀` bounds every point's answer by its distance to `q₀`,
+/// the blocks that could beat that bound for some point of the group are gathered once and
+/// sorted by their distance to the group's box, and each point scans them in that order (each
+/// starting from its predecessor's answer) until the next block's bound reaches its best.
+pub fn nearest_in_block<S: Bucketed>(
+    set: &S,
+    pts: &[[f64; 3]],
+    bound2: f64,
+    scratch: &mut BlockSearch,
+    out: &mut Vec<(f64, u32)>,
+) {
+    out.clear();
+    let Some(&first) = pts.first() else { return };
+    let domain = set.domain();
+    let bk = block_of(domain.key(first));
+    if pts.iter().any(|&p| block_of(domain.key(p)) != bk) {
+        // Not one block of this set's grid: one search per point.
+        out.extend(pts.iter().map(|&p| nearest_in(set, p, bound2)));
+        return;
+    }
+    let (d0, s0) = nearest_in(set, first, bound2);
+    let q0 = (s0 != NONE).then(|| set.position(s0));
+    // Each point's starting bound (admitting q₀ itself) and the group's largest.
+    let start = |p: [f64; 3]| match q0 {
+        Some(q) => above(dist2(p, q)).min(bound2),
+        None => bound2,
+    };
+    let mut gbox = Aabb::EMPTY;
+    let mut reach: f64 = 0.0;
+    for &p in &pts[1..] {
+        gbox.grow(p);
+        reach = reach.max(start(p));
+    }
+    out.push((d0, s0));
+    if reach <= 0.0 {
+        // A bound of 0 admits nothing (and a single point has no others).
+        out.extend(pts[1..].iter().map(|_| (bound2, NONE)));
+        return;
+    }
+    let h2 = domain.h * domain.h;
+    let mut gathered = false;
+    let mut prev = s0;
+    for &p in &pts[1..] {
+        let mut b0 = start(p);
+        if prev != NONE {
+            b0 = b0.min(above(dist2(p, set.position(prev))));
+        }
+        let mut best = (b0, NONE);
+        let consider = |best: &mut (f64, u32), i: u32, q: [f64; 3]| {
+            let d = dist2(p, q);
+            if d < best.0 || (d == best.0 && best.1 != NONE && i < best.1) {
+                *best = (d, i);
+            }
+        };
+        // Anything outside the 27 voxels around p is at least h away.
+        set.for_cells_around(domain.key(p), |i, q| consider(&mut best, i, q));
+        if best.0 <= h2 {
+            if best.1 != NONE {
+                prev = best.1;
+            }
+            out.push(best);
+            continue;
+        }
+        if !gathered {
+            gathered = true;
+            gather_candidates(set, bk, &gbox, reach, &mut scratch.cand);
+        }
+        for (lb, b, aabb) in scratch.cand.iter() {
+            if *lb >= best.0 {
+                break;
+            }
+            if aabb.dist2(p) >= best.0 {
+                continue;
+            }
+            set.for_block(*b, |i, q| consider(&mut best, i, q));
+        }
+        // Nothing found below the start bound only when that bound was `bound2` (q₀ and the
+        // predecessor's answer are always found): `(bound2, NONE)`, as nearest_in.
+        if best.1 != NONE {
+            prev = best.1;
+        }
+        out.push(best);
+    }
+}
+
+/// The blocks of `set` whose box is closer than √reach to `gbox` (points of block `bk`), with
+/// that squared distance, sorted by it.
+fn gather_candidates<S: Bucketed>(
+    set: &S,
+    bk: [i32; 3],
+    gbox: &Aabb,
+    reach: f64,
+    cand: &mut Vec<(f64, [i32; 3], Aabb)>,
+) {
+    cand.clear();
+    let domain = set.domain();
+    let grid = set.supergrid();
+    let e_super = domain.h * (BLOCK << SUPER_SHIFT) as f64;
+    let sk = [bk[0] >> SUPER_SHIFT, bk[1] >> SUPER_SHIFT, bk[2] >> SUPER_SHIFT];
+    for r in 0..=grid.max_ring(sk) {
+        // Everything beyond ring r − 1 is at least (r − 1)·E from the group's superblock.
+        if r > 0 && ((r - 1) as f64 * e_super).powi(2) >= reach {
+            break;
+        }
+        for_each_ring_block(sk, r, |s| {
+            if box_box_dist2(&domain.cube_box(s, BLOCK << SUPER_SHIFT), gbox) >= reach {
+                return;
+            }
+            for (b, aabb) in grid.blocks(s) {
+                let lb = box_box_dist2(aabb, gbox);
+                if lb < reach {
+                    cand.push((lb, *b, *aabb));
+                }
+            }
+        });
+    }
+    cand.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
 }
 
 /// `(domain block index, local voxel index, input index)` of every point, sorted (by block,
@@ -596,5 +747,64 @@ mod tests {
             assert_eq!(seen.len() as i32, n);
             assert!(seen.iter().all(|b| b.iter().map(|x| x.abs()).max() == Some(r)));
         }
+    }
+
+    /// Brute force: the smallest d² of `pts` to `p` below `bound2`, or `bound2`.
+    fn brute(pts: &[[f64; 3]], p: [f64; 3], bound2: f64) -> f64 {
+        pts.iter().map(|&q| dist2(p, q)).filter(|&d| d < bound2).fold(bound2, f64::min)
+    }
+
+    #[test]
+    fn block_searches_find_what_brute_force_finds() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(31);
+        let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.0);
+        // Two patches of surface (one moved by a second insertion) and a lone far point, so
+        // that queries meet near answers, far answers and answers in other superblocks.
+        let mut fused = FusedCloud::new(domain.clone());
+        let patch = |rng: &mut rand_chacha::ChaCha8Rng, c: [f64; 3], n: usize| -> Vec<[f64; 3]> {
+            (0..n).map(|_| [c[0] + rng.gen_range(-0.1..0.1), c[1] + rng.gen_range(-0.1..0.1), c[2]]).collect()
+        };
+        fused.insert(&patch(&mut rng, [0.2, 0.1, -0.3], 4000));
+        fused.insert(&patch(&mut rng, [-0.3, 0.0, 0.35], 3000));
+        fused.insert(&patch(&mut rng, [0.2, 0.1, -0.3], 2000));
+        fused.insert(&[[0.5, -0.5, 0.5]]);
+        let all: Vec<[f64; 3]> = fused.pos.clone();
+        let mut scratch = BlockSearch::default();
+        let mut out = Vec::new();
+        let mut far = 0;
+        for trial in 0..300 {
+            // A group of queries inside one random block.
+            let c: [f64; 3] = [0; 3].map(|_: i32| rng.gen_range(-0.55..0.55));
+            let bk = block_of(domain.key(c));
+            let e = domain.h * BLOCK as f64;
+            let n = rng.gen_range(1..40);
+            let pts: Vec<[f64; 3]> = (0..n)
+                .map(|_| [0, 1, 2].map(|a| (bk[a] as f64 + rng.gen_range(0.01..0.99)) * e))
+                .filter(|&p| block_of(domain.key(p)) == bk)
+                .collect();
+            let bound2 = if trial % 3 == 0 { 0.04 } else { f64::INFINITY };
+            nearest_in_block(&fused, &pts, bound2, &mut scratch, &mut out);
+            assert_eq!(out.len(), pts.len());
+            for (&p, &(d, s)) in pts.iter().zip(&out) {
+                let want = brute(&all, p, bound2);
+                assert_eq!(d, want, "trial {trial}: {p:?}");
+                if s == NONE {
+                    assert_eq!(d, bound2);
+                } else {
+                    assert_eq!(dist2(p, fused.pos[s as usize]), d);
+                    assert_eq!(d, nearest_in(&fused, p, bound2).0);
+                }
+                if d > 0.01 && d.is_finite() {
+                    far += 1;
+                }
+            }
+        }
+        assert!(far > 1000, "the trials should meet far answers ({far})");
+        // Bound 0 admits nothing; an empty group gives nothing.
+        nearest_in_block(&fused, &[[0.1, 0.1, 0.1], [0.101, 0.1, 0.1]], 0.0, &mut scratch, &mut out);
+        assert_eq!(out, vec![(0.0, NONE); 2]);
+        nearest_in_block(&fused, &[], 1.0, &mut scratch, &mut out);
+        assert!(out.is_empty());
     }
 }

@@ -18,6 +18,7 @@ use objview_episode::{
 use objview_geom::Pose;
 use objview_render::{Camera, Frame, Renderer};
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::random::same_pose;
@@ -129,20 +130,27 @@ impl Planner for Oracle {
         // The per-candidate clouds are fused at the oracle's own voxel size.
         let domain = scene_domain(&oracle.mesh, &oracle.reference, self.voxel);
         let words = targets.len().div_ceil(64);
-        let mut renderer = Renderer::new();
-        self.covers = Vec::with_capacity(self.candidates.len());
-        for (i, pose) in self.candidates.iter().enumerate() {
-            let mut bits = vec![0u64; words];
-            if self.feasible[i] {
-                let cam = Camera::new(*pose, ctx.intrinsics);
-                let mut frame = Frame::empty(cam);
-                renderer.render_into(&oracle.mesh, &cam, &mut frame);
-                let mut fused = FusedCloud::new(domain.clone());
-                fused.insert(&frame.observed_points());
-                targets.mark_within(&fused.pos, self.tau, &mut bits);
-            }
-            self.covers.push(bits);
-        }
+        // Candidates are independent: in parallel on the current rayon pool (each bitset is
+        // the same whatever the thread).
+        let feasible = &self.feasible;
+        let tau = self.tau;
+        self.covers = self
+            .candidates
+            .par_iter()
+            .enumerate()
+            .map_init(Renderer::new, |renderer, (i, pose)| {
+                let mut bits = vec![0u64; words];
+                if feasible[i] {
+                    let cam = Camera::new(*pose, ctx.intrinsics);
+                    let mut frame = Frame::empty(cam);
+                    renderer.render_into(&oracle.mesh, &cam, &mut frame);
+                    let mut fused = FusedCloud::new(domain.clone());
+                    fused.insert(&frame.observed_points());
+                    targets.mark_within(&fused.pos, tau, &mut bits);
+                }
+                bits
+            })
+            .collect();
         self.precompute_seconds = t.elapsed().as_secs_f64();
         Ok(())
     }

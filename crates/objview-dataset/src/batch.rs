@@ -219,6 +219,56 @@ where
     })
 }
 
+/// One batch of [`run_batches`]: its items, its results file and what that file already holds.
+pub struct Batch<'a> {
+    /// The items, in the order their lines are written.
+    pub items: &'a [ObjectRef],
+    /// The results file.
+    pub out: ResumableJsonl,
+    /// What it already holds (those items are skipped).
+    pub existing: &'a Existing,
+}
+
+/// [`run_batch`] for several batches at once: the items of every batch (not yet in its file)
+/// form one list of work on the current rayon pool, so the cores stay busy across batches
+/// instead of idling at the end of each. `work(b, item)` processes an item of batch `b`; each
+/// batch's lines go to its own file in its own input order, so every file is the one that
+/// [`run_batch`] alone would write. A write error stops all batches (what was written stays
+/// valid and resumable).
+pub fn run_batches<W>(batches: Vec<Batch<'_>>, work: W) -> Result<Vec<BatchSummary>, DatasetError>
+where
+    W: Fn(usize, &ObjectRef) -> ItemOutcome + Sync,
+{
+    let mut todo: Vec<(usize, usize, &ObjectRef)> = Vec::new();
+    let mut writers = Vec::with_capacity(batches.len());
+    let mut summaries = Vec::with_capacity(batches.len());
+    for (b, batch) in batches.into_iter().enumerate() {
+        let items: Vec<&ObjectRef> =
+            batch.items.iter().filter(|o| !batch.existing.done.contains(&o.uid)).collect();
+        summaries.push(BatchSummary {
+            total: batch.items.len(),
+            skipped: batch.items.len() - items.len(),
+            processed: items.len(),
+            failed: 0,
+        });
+        todo.extend(items.into_iter().enumerate().map(|(seq, o)| (b, seq, o)));
+        writers.push(Mutex::new(OrderedWriter::new(batch.out)));
+    }
+    let failed: Vec<AtomicUsize> = summaries.iter().map(|_| AtomicUsize::new(0)).collect();
+    todo.par_iter().with_max_len(1).try_for_each(|&(b, seq, obj)| {
+        let outcome = work(b, obj);
+        if outcome.failed {
+            failed[b].fetch_add(1, Ordering::Relaxed);
+        }
+        let mut w = writers[b].lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        w.push(seq, outcome.line).map(|_| ())
+    })?;
+    for (s, f) in summaries.iter_mut().zip(failed) {
+        s.failed = f.into_inner();
+    }
+    Ok(summaries)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -259,6 +309,54 @@ mod tests {
             })
             .collect();
         assert_eq!(uids, items.iter().map(|o| o.uid.clone()).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn batches_run_together_write_what_each_writes_alone() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (objs(25), objs(9));
+        // Alone, one after another.
+        let mut alone = Vec::new();
+        for (name, items) in [("a", &a), ("b", &b)] {
+            let path = dir.path().join(format!("alone-{name}.jsonl"));
+            let (out, ex) = ResumableJsonl::open(&path, "uid", false).unwrap();
+            run_batch(items, out, &ex, work, |_, _| {}).unwrap();
+            alone.push(std::fs::read_to_string(&path).unwrap());
+        }
+        // Together on 3 threads; batch b already holds its first 4 lines.
+        let pb = dir.path().join("together-b.jsonl");
+        let first4: String = alone[1].lines().take(4).map(|l| format!("{l}\n")).collect();
+        std::fs::write(&pb, first4).unwrap();
+        let pa = dir.path().join("together-a.jsonl");
+        let (oa, ea) = ResumableJsonl::open(&pa, "uid", false).unwrap();
+        let (ob, eb) = ResumableJsonl::open(&pb, "uid", false).unwrap();
+        let seen = Mutex::new(Vec::new());
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(3).build().unwrap();
+        let s = pool
+            .install(|| {
+                run_batches(
+                    vec![
+                        Batch { items: &a, out: oa, existing: &ea },
+                        Batch { items: &b, out: ob, existing: &eb },
+                    ],
+                    |i, o| {
+                        seen.lock().unwrap().push((i, o.uid.clone()));
+                        work(o)
+                    },
+                )
+            })
+            .unwrap();
+        assert_eq!((s[0].total, s[0].skipped, s[0].processed, s[0].failed), (25, 0, 25, 3));
+        assert_eq!((s[1].total, s[1].skipped, s[1].processed, s[1].failed), (9, 4, 5, 0));
+        assert_eq!(std::fs::read_to_string(&pa).unwrap(), alone[0]);
+        assert_eq!(std::fs::read_to_string(&pb).unwrap(), alone[1]);
+        // Every item not yet done ran once, with its own batch's index.
+        let mut seen = seen.into_inner().unwrap();
+        seen.sort();
+        let mut want: Vec<(usize, String)> = a.iter().map(|o| (0, o.uid.clone())).collect();
+        want.extend(b[4..].iter().map(|o| (1, o.uid.clone())));
+        want.sort();
+        assert_eq!(seen, want);
     }
 
     #[test]

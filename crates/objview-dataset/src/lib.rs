@@ -16,7 +16,10 @@ pub use annotate::{
     annotate_item, annotate_object, read_annotations, AnnotateSettings, Annotation, AnnotationSet, Failure,
     GridViews, StageTimings,
 };
-pub use batch::{drive, run_batch, BatchStart, BatchSummary, ItemOutcome, ItemProgress, Progress, Silent};
+pub use batch::{
+    drive, run_batch, run_batches, Batch, BatchStart, BatchSummary, ItemOutcome, ItemProgress, Progress,
+    Silent,
+};
 pub use error::DatasetError;
 pub use inputs::{read_split, resolve_inputs, ObjectRef, Shard};
 pub use jsonl::{to_line, Existing, OrderedWriter, ResumableJsonl};

@@ -12,7 +12,8 @@
 //!    checkpoint list is the paper's 5, 30) in `whole` and `quarter`, and the ground-truth
 //!    oracle over tammes-128 on Main-Hidden-Test and Slow-Saturation (the slow-saturation
 //!    table), and every learned or hybrid planner the registry holds (`nbv-net` with its shipped
-//!    weights, automatic budget), into `episodes/*.jsonl` (resumable);
+//!    weights, automatic budget), into `episodes/*.jsonl` (resumable) — all runs' episodes in
+//!    one pool ([`run_plans`]), so the cores stay busy across runs;
 //! 5. write the report (the paper's Tables 2–5, CSVs, figures) into `report/`.
 //!
 //! What it tells the user goes through `say` (one call per line or block of lines), batch
@@ -22,7 +23,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
-use objview_dataset::{ObjectRef, Progress, Silent};
+use objview_dataset::{ObjectRef, Progress};
 use objview_episode::{Budget, ExecutionMode, Family};
 use objview_geom::normalize::{load_normalized, Normalization};
 use objview_geom::pose::VIEW_RADIUS;
@@ -34,7 +35,7 @@ use rayon::prelude::*;
 use serde_json::json;
 
 use crate::annotate::AnnotatePlan;
-use crate::episodes::EpisodePlan;
+use crate::episodes::{run_plans, EpisodePlan};
 use crate::RunError;
 use objview_planners::registry::Registry;
 
@@ -289,13 +290,18 @@ impl DemoPlan {
             test_objects.len(),
             episodes.display()
         ));
-        let mut files = Vec::new();
+        let mut plans = Vec::new();
         let runs = demo_runs(planners);
         for space in ["whole", "quarter"] {
             for &(planner, budget) in &runs {
-                let plan =
-                    self.episode_plan(&episodes, planner, space, budget, test_objects.clone(), None)?;
-                files.push(self.demo_run(&plan, planners, say)?);
+                plans.push(self.episode_plan(
+                    &episodes,
+                    planner,
+                    space,
+                    budget,
+                    test_objects.clone(),
+                    None,
+                )?);
             }
         }
         // The slow-saturation diagnostic: the oracle over tammes-128 until it is exhausted.
@@ -310,8 +316,27 @@ impl DemoPlan {
             plan.candidates = Arc::new(ViewSet::resolve("tammes-128")?.poses(plan.settings.view_radius));
             plan.settings.candidates = "tammes-128".into();
             plan.settings.enough_info = false;
-            files.push(self.demo_run(&plan, planners, say)?);
+            plans.push(plan);
         }
+        // Every run's episodes in one pool (the cores stay busy across runs); each results
+        // file is what the run alone would write.
+        let t = Instant::now();
+        let summaries = run_plans(&plans, planners, None)?;
+        for (plan, s) in plans.iter().zip(&summaries) {
+            say(&format!(
+                "  {:<14} {:<8} budget {:<5} {} episodes ({} failed, {} already done) {:>6.1} s of episodes -> {}",
+                plan.planner,
+                plan.space_name,
+                plan.budget.label(),
+                s.done,
+                s.failed,
+                s.skipped,
+                s.seconds,
+                plan.out.display()
+            ));
+        }
+        say(&format!("episodes: {} runs in {:.1} s", plans.len(), t.elapsed().as_secs_f64()));
+        let files: Vec<PathBuf> = plans.iter().map(|p| p.out.clone()).collect();
         let report_dir = self.out.join("report");
         say(&format!("\n[8/8] report (the paper's Tables 2–5) into {}", report_dir.display()));
         let report = objview_report::build_report(
@@ -349,28 +374,6 @@ impl DemoPlan {
         plan.settings.checkpoint_ks = vec![5, 30];
         plan.settings.candidates = plan.candidates_name.clone();
         Ok(plan)
-    }
-
-    /// Runs one demo plan (quietly) and says what it did.
-    fn demo_run(
-        &self,
-        plan: &EpisodePlan,
-        planners: &Registry,
-        say: &dyn Fn(&str),
-    ) -> Result<PathBuf, RunError> {
-        let s = plan.run(planners, &Silent)?;
-        say(&format!(
-            "  {:<10} {:<8} budget {:<5} {} episodes ({} failed, {} already done) {:>6.1} s -> {}",
-            plan.planner,
-            plan.space_name,
-            plan.budget.label(),
-            s.done,
-            s.failed,
-            s.skipped,
-            s.seconds,
-            plan.out.display()
-        ));
-        Ok(plan.out.clone())
     }
 }
 

@@ -14,7 +14,8 @@ use std::time::Instant;
 use objview_dataset::annotate::gt_cloud_path;
 use objview_dataset::{drive, to_line, BatchSummary, ItemOutcome, ObjectRef, Progress, ResumableJsonl};
 use objview_episode::{
-    load_scene, run_episode, Budget, EpisodeResult, EpisodeSettings, ExecutionMode, Planner, SceneSource,
+    load_scene, run_episode, Budget, EpisodeResult, EpisodeSettings, ExecutionMode, Planner, Scene,
+    SceneSource,
 };
 use objview_geom::normalize::Normalization;
 use objview_geom::Pose;
@@ -174,20 +175,7 @@ impl EpisodePlan {
         planners: &Registry,
         record: &Value,
     ) -> Result<EpisodeResult, RunError> {
-        let gt = gt_cloud_path(obj, self.gt_cloud_dir.as_deref())?;
-        let src = SceneSource {
-            uid: &obj.uid,
-            mesh: &obj.mesh,
-            gt_cloud: gt.as_deref(),
-            normalization: self.normalize,
-        };
-        let scene = Arc::new(load_scene(
-            &src,
-            &self.space,
-            &self.space_name,
-            &self.settings,
-            self.cache_dir.as_deref(),
-        )?);
+        let scene = Arc::new(self.scene(obj)?);
         let mut planner = planners.with_params(&self.planner, &self.params).map_err(RunError::Invalid)?;
         Ok(run_episode(
             scene,
@@ -199,6 +187,19 @@ impl EpisodePlan {
             self.candidates.clone(),
             record.clone(),
         )?)
+    }
+
+    /// The scene of `obj` as this plan's episodes see it (building and caching its observable
+    /// reference when the plan has a cache folder that lacks it).
+    pub fn scene(&self, obj: &ObjectRef) -> Result<Scene, RunError> {
+        let gt = gt_cloud_path(obj, self.gt_cloud_dir.as_deref())?;
+        let src = SceneSource {
+            uid: &obj.uid,
+            mesh: &obj.mesh,
+            gt_cloud: gt.as_deref(),
+            normalization: self.normalize,
+        };
+        Ok(load_scene(&src, &self.space, &self.space_name, &self.settings, self.cache_dir.as_deref())?)
     }
 
     /// Runs the plan's episodes into its results file.
@@ -228,6 +229,85 @@ impl EpisodePlan {
         let what = format!("run {} / {} / budget {}", self.planner, space_name, self.budget.label());
         Ok(drive(&what, None, None, objects, out, &existing, self.threads, work, progress)?)
     }
+}
+
+/// Runs several plans as one batch ([`objview_dataset::run_batches`]): the episodes of every
+/// plan share one pool of `threads` workers (`None`: every core), so the cores stay busy across
+/// plans; each plan's results file is the one [`EpisodePlan::run`] would write (same lines,
+/// same order). Plans with a reference cache folder first build the observable reference of
+/// each distinct object once, in parallel, so that no two episodes build the same one. Each
+/// summary's `seconds` is the sum of its plan's episode times (they ran interleaved).
+pub fn run_plans(
+    plans: &[EpisodePlan],
+    planners: &Registry,
+    threads: Option<usize>,
+) -> Result<Vec<RunSummary>, RunError> {
+    let threads = objview_dataset::batch::thread_count(threads)?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| RunError::Invalid(format!("thread pool: {e}")))?;
+    let mut records = Vec::with_capacity(plans.len());
+    let mut outs = Vec::with_capacity(plans.len());
+    let mut existing = Vec::with_capacity(plans.len());
+    for plan in plans {
+        let probe = plan.validate(planners)?;
+        let record = plan.record(probe.as_ref());
+        check_same_run(&plan.out, &record)?;
+        records.push(record);
+        let (out, ex) = ResumableJsonl::open(&plan.out, "uid", plan.retry_failed)?;
+        outs.push(out);
+        existing.push(ex);
+    }
+    // One reference build per distinct object (with the first plan that runs it), before the
+    // episodes, so that concurrent episodes of one object read it from the cache.
+    let mut warm: Vec<(&EpisodePlan, &ObjectRef)> = Vec::new();
+    let mut seen = std::collections::BTreeSet::new();
+    for (plan, ex) in plans.iter().zip(&existing) {
+        if plan.cache_dir.is_none() {
+            continue;
+        }
+        for obj in &plan.objects {
+            if !ex.done.contains(&obj.uid) && seen.insert(obj.mesh.clone()) {
+                warm.push((plan, obj));
+            }
+        }
+    }
+    let busy: Vec<std::sync::Mutex<f64>> = plans.iter().map(|_| std::sync::Mutex::new(0.0)).collect();
+    let summaries = pool.install(|| {
+        use rayon::prelude::*;
+        // A scene that cannot be built fails its episodes below, with the error in their lines.
+        warm.par_iter().with_max_len(1).for_each(|(plan, obj)| {
+            let _ = plan.scene(obj);
+        });
+        let batches = plans
+            .iter()
+            .zip(outs)
+            .zip(&existing)
+            .map(|((plan, out), existing)| objview_dataset::Batch { items: &plan.objects, out, existing })
+            .collect();
+        objview_dataset::run_batches(batches, |b, obj| {
+            let t = Instant::now();
+            let outcome = match plans[b].episode(obj, planners, &records[b]) {
+                Ok(res) => episode_item(&res),
+                Err(e) => {
+                    failure_item(obj, "mesh", &obj.mesh.display().to_string(), &e.to_string(), &records[b])
+                }
+            };
+            *busy[b].lock().unwrap_or_else(std::sync::PoisonError::into_inner) += t.elapsed().as_secs_f64();
+            outcome
+        })
+    })?;
+    Ok(summaries
+        .iter()
+        .zip(busy)
+        .map(|(s, b)| RunSummary {
+            done: s.processed - s.failed,
+            failed: s.failed,
+            skipped: s.skipped,
+            seconds: b.into_inner().unwrap_or_else(std::sync::PoisonError::into_inner),
+        })
+        .collect())
 }
 
 /// A budgeted-plan planner needs a fixed budget.
@@ -337,6 +417,57 @@ mod tests {
         let other = json!({"planner": "rse", "seed": 2, "episode": {"cap": 129}});
         let e = check_same_run(&out, &other).unwrap_err().to_string();
         assert!(e.contains("r.jsonl:1: this results file holds another run (seed = 1 here, 2 now)"), "{e}");
+    }
+
+    #[test]
+    fn plans_run_together_write_what_each_writes_alone() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut objects = Vec::new();
+        for name in ["cube", "cone"] {
+            let path = dir.path().join(format!("{name}.obj"));
+            objview_geom::write::write_obj(&path, &objview_geom::synth::build_with_triangles(name, 800))
+                .unwrap();
+            objects.push(ObjectRef::from_mesh(&path));
+        }
+        let plans_in = |sub: &str| -> Vec<EpisodePlan> {
+            let out = dir.path().join(sub);
+            std::fs::create_dir_all(&out).unwrap();
+            [("random-tsp", "whole", Budget::Fixed(5)), ("random", "quarter", Budget::Fixed(3))]
+                .iter()
+                .map(|&(planner, space, budget)| {
+                    let mut p =
+                        EpisodePlan::new(planner, objects.clone(), out.join(format!("{planner}.jsonl")))
+                            .unwrap();
+                    p.space = ViewSpace::builtin(space).unwrap();
+                    p.space_name = space.into();
+                    p.budget = budget;
+                    p.settings.record_timings = false;
+                    p.cache_dir = Some(dir.path().join("cache"));
+                    p
+                })
+                .collect()
+        };
+        let planners = Registry::builtin();
+        let alone = plans_in("alone");
+        for p in &alone {
+            let s = p.run(&planners, &objview_dataset::Silent).unwrap();
+            assert_eq!((s.done, s.failed), (2, 0));
+        }
+        // Together, with the first episode of the second plan already in its file.
+        let together = plans_in("together");
+        let first = std::fs::read_to_string(&alone[1].out).unwrap();
+        std::fs::write(&together[1].out, format!("{}\n", first.lines().next().unwrap())).unwrap();
+        let s = run_plans(&together, &planners, Some(2)).unwrap();
+        assert_eq!(
+            s.iter().map(|s| (s.done, s.failed, s.skipped)).collect::<Vec<_>>(),
+            [(2, 0, 0), (1, 0, 1)]
+        );
+        assert!(s.iter().all(|s| s.seconds > 0.0));
+        for (a, t) in alone.iter().zip(&together) {
+            let (a, t) = (std::fs::read_to_string(&a.out).unwrap(), std::fs::read_to_string(&t.out).unwrap());
+            assert_eq!(a.lines().count(), 2);
+            assert_eq!(a, t);
+        }
     }
 
     #[test]

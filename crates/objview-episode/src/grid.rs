@@ -116,7 +116,7 @@ pub trait Bucketed {
     fn supergrid(&self) -> &SuperGrid;
     /// Calls `f(index, position)` for every point in the 27 fine voxels within one voxel of
     /// `k` (each voxel once; the order is the store's): runs along x inside a block
-    /// ([`runs_around`]: one block lookup per run, an empty block skips its whole run).
+    /// (`runs_around`: one block lookup per run, an empty block skips its whole run).
     fn for_cells_around<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], f: F);
     /// The position of point `index`.
     fn position(&self, index: u32) -> [f64; 3];

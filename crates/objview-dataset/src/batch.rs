@@ -199,24 +199,8 @@ where
     W: Fn(&ObjectRef) -> ItemOutcome + Sync,
     P: Fn(&ObjectRef, &ItemOutcome) + Sync,
 {
-    let todo: Vec<&ObjectRef> = items.iter().filter(|o| !existing.done.contains(&o.uid)).collect();
-    let writer = Mutex::new(OrderedWriter::new(out));
-    let failed = AtomicUsize::new(0);
-    todo.par_iter().enumerate().try_for_each(|(seq, obj)| {
-        let outcome = work(obj);
-        if outcome.failed {
-            failed.fetch_add(1, Ordering::Relaxed);
-        }
-        progress(obj, &outcome);
-        let mut w = writer.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-        w.push(seq, outcome.line).map(|_| ())
-    })?;
-    Ok(BatchSummary {
-        total: items.len(),
-        skipped: items.len() - todo.len(),
-        processed: todo.len(),
-        failed: failed.into_inner(),
-    })
+    let mut s = run_batches(vec![Batch { items, out, existing }], |_, o| work(o), |_, o, r| progress(o, r))?;
+    Ok(s.remove(0))
 }
 
 /// One batch of [`run_batches`]: its items, its results file and what that file already holds.
@@ -231,13 +215,18 @@ pub struct Batch<'a> {
 
 /// [`run_batch`] for several batches at once: the items of every batch (not yet in its file)
 /// form one list of work on the current rayon pool, so the cores stay busy across batches
-/// instead of idling at the end of each. `work(b, item)` processes an item of batch `b`; each
-/// batch's lines go to its own file in its own input order, so every file is the one that
-/// [`run_batch`] alone would write. A write error stops all batches (what was written stays
-/// valid and resumable).
-pub fn run_batches<W>(batches: Vec<Batch<'_>>, work: W) -> Result<Vec<BatchSummary>, DatasetError>
+/// instead of idling at the end of each. `work(b, item)` processes an item of batch `b` and
+/// `progress(b, item, outcome)` sees it finished (from worker threads); each batch's lines go
+/// to its own file in its own input order, so every file is the one that [`run_batch`] alone
+/// would write. A write error stops all batches (what was written stays valid and resumable).
+pub fn run_batches<W, P>(
+    batches: Vec<Batch<'_>>,
+    work: W,
+    progress: P,
+) -> Result<Vec<BatchSummary>, DatasetError>
 where
     W: Fn(usize, &ObjectRef) -> ItemOutcome + Sync,
+    P: Fn(usize, &ObjectRef, &ItemOutcome) + Sync,
 {
     let mut todo: Vec<(usize, usize, &ObjectRef)> = Vec::new();
     let mut writers = Vec::with_capacity(batches.len());
@@ -260,6 +249,7 @@ where
         if outcome.failed {
             failed[b].fetch_add(1, Ordering::Relaxed);
         }
+        progress(b, obj, &outcome);
         let mut w = writers[b].lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         w.push(seq, outcome.line).map(|_| ())
     })?;
@@ -343,6 +333,7 @@ mod tests {
                         seen.lock().unwrap().push((i, o.uid.clone()));
                         work(o)
                     },
+                    |_, _, _| {},
                 )
             })
             .unwrap();

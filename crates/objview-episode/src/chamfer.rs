@@ -346,14 +346,11 @@ impl Targets {
         let cap2 = self.cap2;
         let found: Vec<Vec<(f64, u32)>> = (0..ix.cell_start.len())
             .into_par_iter()
-            .map_init(
-                || (BlockSearch::default(), Vec::new()),
-                |(scratch, out), t| {
-                    let r = ix.block_range(t as u32);
-                    nearest_in_block(fused, &ix.pts[r], cap2, scratch, out);
-                    out.clone()
-                },
-            )
+            .map_init(BlockSearch::default, |scratch, t| {
+                let mut out = Vec::new();
+                nearest_in_block(fused, &ix.pts[ix.block_range(t as u32)], cap2, scratch, &mut out);
+                out
+            })
             .collect();
         for (i, &(d, s)) in found.iter().flatten().enumerate() {
             (self.d2[i], self.nn[i]) = if s == NONE { (f64::INFINITY, NONE) } else { (d, s) };
@@ -369,22 +366,13 @@ impl Targets {
             })
             .collect();
         by_block.sort_unstable();
-        let mut spans = Vec::new();
-        let mut start = 0;
-        while start < by_block.len() {
-            let mut end = start + 1;
-            while end < by_block.len() && by_block[end].0 == by_block[start].0 {
-                end += 1;
-            }
-            spans.push((start, end));
-            start = end;
-        }
+        let spans = equal_runs(by_block.len(), |j| by_block[j].0);
         let this = &*self;
         let near: Vec<Vec<(f64, u32)>> = spans
             .par_iter()
             .map_init(
-                || (BlockSearch::default(), Vec::new(), Vec::new()),
-                |(scratch, pts, out), &(a, b)| {
+                || (BlockSearch::default(), Vec::new()),
+                |(scratch, pts), &(a, b)| {
                     pts.clear();
                     pts.extend(
                         by_block[a..b].iter().map(|&(_, ci)| fused.pos[changed[ci as usize] as usize]),
@@ -393,8 +381,9 @@ impl Targets {
                         // Outside the target domain (not a block of it): one search each.
                         pts.iter().map(|&q| nearest_in(this, q, f64::INFINITY)).collect()
                     } else {
-                        nearest_in_block(this, pts, f64::INFINITY, scratch, out);
-                        out.clone()
+                        let mut out = Vec::new();
+                        nearest_in_block(this, pts, f64::INFINITY, scratch, &mut out);
+                        out
                     }
                 },
             )
@@ -527,24 +516,29 @@ impl Targets {
     /// The runs of `idx` (target indices in increasing order) that share a target block:
     /// `(start, end)` into `idx`.
     fn block_spans(&self, idx: &[u32]) -> Vec<(usize, usize)> {
-        let mut spans = Vec::new();
-        let mut start = 0;
-        while start < idx.len() {
-            let tb = self.block_of_point(idx[start] as usize);
-            let mut end = start + 1;
-            while end < idx.len() && self.block_of_point(idx[end] as usize) == tb {
-                end += 1;
-            }
-            spans.push((start, end));
-            start = end;
-        }
-        spans
+        equal_runs(idx.len(), |j| self.block_of_point(idx[j] as usize))
     }
 
     /// Target-block index of point `i` (points are sorted by block).
     fn block_of_point(&self, i: usize) -> [i32; 3] {
         block_of(self.ix.domain.key(self.ix.pts[i]))
     }
+}
+
+/// The maximal runs `(start, end)` of `0..n` over which `key` stays the same.
+fn equal_runs<K: PartialEq>(n: usize, key: impl Fn(usize) -> K) -> Vec<(usize, usize)> {
+    let mut spans = Vec::new();
+    let mut start = 0;
+    while start < n {
+        let k = key(start);
+        let mut end = start + 1;
+        while end < n && key(end) == k {
+            end += 1;
+        }
+        spans.push((start, end));
+        start = end;
+    }
+    spans
 }
 
 /// A far target's new distance (see [`Targets::far_block`]).

@@ -189,6 +189,14 @@ impl EpisodePlan {
         )?)
     }
 
+    /// The batch item of `obj`: its episode's line, or a failure line when it could not run.
+    pub fn item(&self, obj: &ObjectRef, planners: &Registry, record: &Value) -> ItemOutcome {
+        match self.episode(obj, planners, record) {
+            Ok(res) => episode_item(&res),
+            Err(e) => failure_item(obj, "mesh", &obj.mesh.display().to_string(), &e.to_string(), record),
+        }
+    }
+
     /// The scene of `obj` as this plan's episodes see it (building and caching its observable
     /// reference when the plan has a cache folder that lacks it).
     pub fn scene(&self, obj: &ObjectRef) -> Result<Scene, RunError> {
@@ -208,10 +216,7 @@ impl EpisodePlan {
         let probe = self.validate(planners)?;
         let record = self.record(probe.as_ref());
         check_same_run(&self.out, &record)?;
-        let work = |obj: &ObjectRef| match self.episode(obj, planners, &record) {
-            Ok(res) => episode_item(&res),
-            Err(e) => failure_item(obj, "mesh", &obj.mesh.display().to_string(), &e.to_string(), &record),
-        };
+        let work = |obj: &ObjectRef| self.item(obj, planners, &record);
         let summary = self.drive(&self.objects, &self.space_name, work, progress)?;
         Ok(RunSummary::from_batch(&summary, t))
     }
@@ -286,17 +291,17 @@ pub fn run_plans(
             .zip(&existing)
             .map(|((plan, out), existing)| objview_dataset::Batch { items: &plan.objects, out, existing })
             .collect();
-        objview_dataset::run_batches(batches, |b, obj| {
-            let t = Instant::now();
-            let outcome = match plans[b].episode(obj, planners, &records[b]) {
-                Ok(res) => episode_item(&res),
-                Err(e) => {
-                    failure_item(obj, "mesh", &obj.mesh.display().to_string(), &e.to_string(), &records[b])
-                }
-            };
-            *busy[b].lock().unwrap_or_else(std::sync::PoisonError::into_inner) += t.elapsed().as_secs_f64();
-            outcome
-        })
+        objview_dataset::run_batches(
+            batches,
+            |b, obj| {
+                let t = Instant::now();
+                let outcome = plans[b].item(obj, planners, &records[b]);
+                *busy[b].lock().unwrap_or_else(std::sync::PoisonError::into_inner) +=
+                    t.elapsed().as_secs_f64();
+                outcome
+            },
+            |_, _, _| {},
+        )
     })?;
     Ok(summaries
         .iter()

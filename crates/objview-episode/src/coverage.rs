@@ -19,14 +19,19 @@
 //! a fused point never leaves its voxel, so once an occupied voxel lies entirely within the
 //! smallest τ of a target, that target is covered at every τ for the rest of the episode and
 //! is never looked at again. On observed surfaces that happens at the first view that sees
-//! them (the target's own voxel is within h√3 ≈ 0.0087 < 0.01 of all its points).
+//! them (the target's own voxel is within h√3 ≈ 0.0087 < 0.01 of all its points), and such a
+//! target is settled before any search: its own voxel's slot is its witness.
+//!
+//! The searching targets of a block scan the changed groups together, group by group, in the
+//! order and with the running bounds a per-target walk would use (same answers), so that each
+//! group's box is tested against all of them while it is at hand.
 
 use std::sync::Arc;
 
 use rayon::prelude::*;
 
 use crate::fusion::FusedCloud;
-use crate::grid::{dist2, keyed_points, ChangedBlocks, Domain, NONE};
+use crate::grid::{dist2, keyed_points, local_index, ChangedBlocks, Domain, NONE};
 
 /// Safety margin (units²) of the retirement test: a voxel counts as inside the ball only with
 /// this much to spare, so that a centroid rounded an ulp outside its voxel cannot matter.
@@ -40,6 +45,18 @@ struct Index {
     pts: Vec<[f64; 3]>,
     /// Per target block: its block key and the range of its points.
     blocks: Vec<([i32; 3], u32, u32)>,
+}
+
+/// Per-worker buffers of [`Coverage::block_changes`], kept across target blocks.
+#[derive(Default)]
+struct Scratch {
+    /// Changed groups within τ_max of the block: (lower bound, group).
+    cand: Vec<(f64, usize)>,
+    /// The targets that search the groups, their positions by coordinate and their best
+    /// (d², slot) so far.
+    who: Vec<u32>,
+    xyz: [Vec<f64>; 3],
+    best: Vec<(f64, u32)>,
 }
 
 /// One update of a target (see [`Coverage::update`]).
@@ -168,7 +185,7 @@ impl Coverage {
             .live_blocks
             .par_iter()
             .with_min_len(16)
-            .map(|&tb| this.block_changes(fused, groups, tb))
+            .map_init(Scratch::default, |sc, &tb| this.block_changes(fused, groups, tb, sc))
             .collect();
         let mut any_retired = false;
         for c in changes.iter().flatten() {
@@ -202,23 +219,53 @@ impl Coverage {
         }
     }
 
-    /// The changes of the live targets of target block `tb` (see the module docs).
-    fn block_changes(&self, fused: &FusedCloud, groups: &ChangedBlocks, tb: u32) -> Vec<Change> {
+    /// The changes of the live targets of target block `tb` (see the module docs), using the
+    /// worker's buffers `sc`.
+    ///
+    /// Three passes: each target is settled at once where it can be (own voxel occupied:
+    /// retired; covered by an unmoved witness: nothing to do) or gets its starting bound; then
+    /// the changed groups are scanned group by group for all the searching targets together
+    /// (each group's box tested against every target's bound while it is in registers,
+    /// instead of every target walking the group list); then each target's answer is decided.
+    /// Every target sees the groups in the same order and with the same running bound as a
+    /// per-target walk would, so the answers (distances and slots) are those of one.
+    fn block_changes(
+        &self,
+        fused: &FusedCloud,
+        groups: &ChangedBlocks,
+        tb: u32,
+        sc: &mut Scratch,
+    ) -> Vec<Change> {
         let domain = &self.ix.domain;
         let (key, _, _) = self.ix.blocks[tb as usize];
-        let mut cand: Vec<(f64, usize)> = Vec::new();
-        groups.candidates(domain, key, self.r2, &mut cand);
+        sc.cand.clear();
+        groups.candidates(domain, key, self.r2, &mut sc.cand);
         let mut out = Vec::new();
-        if cand.is_empty() {
+        if sc.cand.is_empty() {
             // No changed slot within τ_max of this block: nothing in it can change.
             return out;
         }
-        cand.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        sc.cand.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         let epoch = fused.epoch();
+        // The fused block of this target block: a target whose own voxel is occupied and lies
+        // entirely within τ_min of it retires at once (its slot is a witness), with no search.
+        let own_block = domain.block_index(key).and_then(|b| fused.block_at(b));
+        sc.who.clear();
+        sc.best.clear();
+        sc.xyz.iter_mut().for_each(Vec::clear);
         for &i in &self.live[tb as usize] {
             let iu = i as usize;
             let p = self.ix.pts[iu];
             let (old, old_nn) = (self.d2[iu], self.nn[iu]);
+            if let Some(fb) = own_block {
+                let k = domain.key(p);
+                let s = fb.cells[local_index(k)];
+                if s != NONE && max_corner_d2(domain.h, k, p) < self.retire2 {
+                    let d2 = dist2(p, fused.pos[s as usize]);
+                    out.push(Change { target: i, d2, nn: s, retire: true });
+                    continue;
+                }
+            }
             let moved = old_nn != NONE && fused.stamp[old_nn as usize] == epoch;
             if old < self.tmin2 {
                 // Covered at every τ by `old_nn`: nothing to do while it stays within τ_min.
@@ -237,8 +284,8 @@ impl Coverage {
                 out.push(Change { target: i, d2, nn, retire });
                 continue;
             }
-            // The nearest changed slot below the bound that matters.
-            let mut best = if moved {
+            // The nearest changed slot below the bound that matters: its starting bound.
+            let best = if moved {
                 let d = dist2(p, fused.pos[old_nn as usize]);
                 if d < self.r2 {
                     (d, old_nn)
@@ -248,19 +295,36 @@ impl Coverage {
             } else {
                 (old.min(self.r2), NONE)
             };
-            for &(lb, gi) in &cand {
+            sc.who.push(i);
+            sc.best.push(best);
+            for (c, &x) in sc.xyz.iter_mut().zip(&p) {
+                c.push(x);
+            }
+        }
+        // The changed groups in order of their block's distance, for all searching targets.
+        let (xs, ys, zs) = (&sc.xyz[0], &sc.xyz[1], &sc.xyz[2]);
+        for &(lb, gi) in &sc.cand {
+            let g = &groups.blocks[gi];
+            for (t, best) in sc.best.iter_mut().enumerate() {
+                // `lb` bounds the distance to every later group too (a per-target walk stops).
                 if lb >= best.0 {
-                    break;
+                    continue;
                 }
-                let g = &groups.blocks[gi];
+                let p = [xs[t], ys[t], zs[t]];
                 if g.aabb.dist2(p) >= best.0 {
                     continue;
                 }
                 let (d, j) = groups.nearest_in_group(g, p);
                 if d < best.0 {
-                    best = (d, groups.slots[j]);
+                    *best = (d, groups.slots[j]);
                 }
             }
+        }
+        for (t, (&i, &best)) in sc.who.iter().zip(&sc.best).enumerate() {
+            let iu = i as usize;
+            let p = [xs[t], ys[t], zs[t]];
+            let (old, old_nn) = (self.d2[iu], self.nn[iu]);
+            let moved = old_nn != NONE && fused.stamp[old_nn as usize] == epoch;
             let (d2, nn) = if !moved {
                 if best.1 == NONE {
                     (old, old_nn)

@@ -9,6 +9,18 @@
 use objview_geom::num::floor_i32;
 use rustc_hash::FxHashSet;
 
+/// Entries of the recent-key cache of [`Stabilization::add_fine_keys`].
+const RECENT: usize = 256;
+
+/// The cache entry of δ-voxel key `d`.
+#[inline]
+fn recent_slot(d: [i32; 3]) -> usize {
+    let h = (d[0] as u32).wrapping_mul(0x9E37_79B1)
+        ^ (d[1] as u32).wrapping_mul(0x85EB_CA77)
+        ^ (d[2] as u32).wrapping_mul(0xC2B2_AE3D);
+    (h >> 24) as usize % RECENT
+}
+
 /// The stabilization rule for one δ.
 #[derive(Debug, Clone)]
 pub struct Stabilization {
@@ -21,6 +33,8 @@ pub struct Stabilization {
     ratio: Option<i32>,
     h: f64,
     voxels: FxHashSet<[i32; 3]>,
+    /// Direct-mapped cache of keys known to be in `voxels` (see [`Stabilization::add_fine_keys`]).
+    recent: Box<[Option<[i32; 3]>; RECENT]>,
     prev: Option<usize>,
     run: usize,
     triggered_at: Option<usize>,
@@ -38,6 +52,7 @@ impl Stabilization {
             ratio,
             h,
             voxels: FxHashSet::default(),
+            recent: Box::new([None; RECENT]),
             prev: None,
             run: 0,
             triggered_at: None,
@@ -54,7 +69,13 @@ impl Stabilization {
                     [c(k[0]), c(k[1]), c(k[2])]
                 }
             };
-            self.voxels.insert(d);
+            // Keys arrive by block and voxel, so neighbours share δ-voxels: a small cache of
+            // keys already in the set skips most repeated hash insertions (same set).
+            let slot = &mut self.recent[recent_slot(d)];
+            if *slot != Some(d) {
+                self.voxels.insert(d);
+                *slot = Some(d);
+            }
         }
     }
 
@@ -128,5 +149,36 @@ mod tests {
         let mut t = Stabilization::new(0.012, 0.005, 0.01, 3); // not a multiple: centre rule
         t.add_fine_keys([[0, 0, 0], [1, 0, 0], [2, 0, 0]]); // centres 0.0025, 0.0075, 0.0125
         assert_eq!(t.count(), 2);
+    }
+
+    #[test]
+    fn counts_equal_a_plain_set_of_the_delta_voxels() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+        for (delta, h) in [(0.02, 0.005), (0.012, 0.005), (0.005, 0.005)] {
+            let mut s = Stabilization::new(delta, h, 0.01, 3);
+            let mut plain = std::collections::HashSet::new();
+            for _ in 0..50 {
+                // Runs of neighbouring keys (as fusion delivers them) and scattered repeats.
+                let keys: Vec<[i32; 3]> = (0..400)
+                    .map(|j| {
+                        if rng.gen_bool(0.3) {
+                            [0; 3].map(|_: i32| rng.gen_range(-40..40))
+                        } else {
+                            [j % 16 - 8, (j / 16) % 8 - 4, rng.gen_range(-2..2)]
+                        }
+                    })
+                    .collect();
+                for &k in &keys {
+                    let d = match s.ratio {
+                        Some(m) => k.map(|x| x.div_euclid(m)),
+                        None => k.map(|x| floor_i32(((x as f64 + 0.5) * h) / delta)),
+                    };
+                    plain.insert(d);
+                }
+                s.add_fine_keys(keys);
+                assert_eq!(s.count(), plain.len(), "δ {delta}");
+            }
+        }
     }
 }

@@ -22,6 +22,10 @@ pub struct EpisodeBenchArgs {
     /// Planner steps timed for each of rse and rse-mov (0 skips them).
     #[arg(long, default_value_t = 10)]
     pub planner_steps: usize,
+    /// Short episodes as `bench serve`'s clients play them (start view + 5 random tammes-360
+    /// moves, budget 5, CD at the checkpoint K=5), timed on one thread (0 skips them).
+    #[arg(long, default_value_t = 8)]
+    pub short_episodes: usize,
     /// Also write the figures as JSON.
     #[arg(long)]
     pub json: Option<std::path::PathBuf>,
@@ -35,6 +39,7 @@ impl EpisodeBenchArgs {
             gt_points: self.gt_points,
             views: self.views,
             planner_steps: self.planner_steps,
+            short_episodes: self.short_episodes,
         }
     }
 }
@@ -93,6 +98,21 @@ pub fn bench_episode(a: EpisodeBenchArgs) -> Result<()> {
             1e3 * p.seconds.median,
             1e3 * p.seconds.p90,
             1e3 * p.seconds.max
+        );
+    }
+    if let Some(e) = &r.short {
+        let views: Vec<String> = e.per_view.iter().map(|t| format!("{:.1}", 1e3 * t)).collect();
+        println!(
+            "short episodes ({} of start + 5 random moves, as `bench serve`'s clients; one thread): engine {:.1} ms per episode = render {:.1} + fusion {:.1} + SC/NSC coverage {:.1} + MS/rest {:.1} + checkpoint K=5 (CD) {:.1} ms; per view [{}] ms; {:.1} moves/s of one core",
+            e.episodes,
+            1e3 * e.per_episode(),
+            1e3 * e.stages.render,
+            1e3 * e.stages.fusion,
+            1e3 * e.stages.coverage,
+            1e3 * e.stages.rest,
+            1e3 * e.checkpoint,
+            views.join(", "),
+            e.moves_per_core_second()
         );
     }
     if let Some(path) = &a.json {

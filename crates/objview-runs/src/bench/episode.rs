@@ -39,10 +39,18 @@ pub struct EpisodeBenchSettings {
     pub views: usize,
     /// Planner steps timed for each of [`TIMED_PLANNERS`] (0 skips them).
     pub planner_steps: usize,
+    /// Short episodes as `bench serve`'s clients play them ([`SHORT_MOVES`] random distinct
+    /// tammes-360 moves after the start view, budget [`SHORT_MOVES`]), on one thread (0 skips
+    /// them).
+    pub short_episodes: usize,
 }
 
+/// Moves of a short episode (`objview bench serve`'s default budget).
+pub const SHORT_MOVES: usize = 5;
+
 impl Default for EpisodeBenchSettings {
-    /// The mug at ~100k triangles with 300k ground-truth points, 50 views, 10 planner steps.
+    /// The mug at ~100k triangles with 300k ground-truth points, 50 views, 10 planner steps,
+    /// 8 short episodes.
     fn default() -> EpisodeBenchSettings {
         EpisodeBenchSettings {
             object: "mug".into(),
@@ -50,12 +58,14 @@ impl Default for EpisodeBenchSettings {
             gt_points: 300_000,
             views: 50,
             planner_steps: 10,
+            short_episodes: 8,
         }
     }
 }
 
-/// Median seconds per engine stage of the one-thread episode, over the views without a
-/// checkpoint.
+/// Seconds per engine stage: the medians of the one-thread episode over the views without a
+/// checkpoint ([`EpisodeBenchReport::stages`]), or the per-episode sums of the short episodes
+/// ([`ShortEpisodes::stages`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StageMedians {
     /// Depth rendering.
@@ -66,6 +76,33 @@ pub struct StageMedians {
     pub coverage: f64,
     /// MS and bookkeeping.
     pub rest: f64,
+}
+
+/// The engine's cost of short episodes (start view + [`SHORT_MOVES`] random moves, the
+/// checkpoint `K=5` with its CD at the last one): what one episode of `objview bench serve`
+/// costs the server's engine. Means over the episodes, seconds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShortEpisodes {
+    /// Episodes run.
+    pub episodes: usize,
+    /// Engine seconds per view (start view first), CD included at the last.
+    pub per_view: Vec<f64>,
+    /// Stage sums per episode over its views (the last view's MS and bookkeeping excluded).
+    pub stages: StageMedians,
+    /// The last view's MS, bookkeeping and checkpoint CD.
+    pub checkpoint: f64,
+}
+
+impl ShortEpisodes {
+    /// Engine seconds per episode.
+    pub fn per_episode(&self) -> f64 {
+        self.per_view.iter().sum()
+    }
+
+    /// Moves per second of one core spent on nothing but the engine.
+    pub fn moves_per_core_second(&self) -> f64 {
+        SHORT_MOVES as f64 / self.per_episode().max(1e-12)
+    }
 }
 
 /// Planning time per step of one planner (its first step, from the start pose, left out).
@@ -121,6 +158,8 @@ pub struct EpisodeBenchReport {
     pub stages: StageMedians,
     /// Planning times, one per [`TIMED_PLANNERS`] entry (empty when `planner_steps` is 0).
     pub planners: Vec<PlannerTiming>,
+    /// Short episodes (`None` when `short_episodes` is 0).
+    pub short: Option<ShortEpisodes>,
 }
 
 impl EpisodeBenchReport {
@@ -143,6 +182,7 @@ impl EpisodeBenchReport {
             "settings": crate::provenance::settings("bench episode", json!({
                 "object": self.settings.object, "triangles": self.triangles, "gt_points": self.gt_points,
                 "views": self.settings.views, "threads": self.threads,
+                "short_episodes": self.settings.short_episodes,
             })),
             "reference_seconds": self.reference_seconds,
             "reference_points": self.reference_points,
@@ -158,6 +198,14 @@ impl EpisodeBenchReport {
             "stage_median_s": {"render": self.stages.render, "fusion": self.stages.fusion,
                                "coverage": self.stages.coverage, "rest": self.stages.rest},
             "planners": planners,
+            "short_episodes": self.short.as_ref().map(|e| json!({
+                "episodes": e.episodes, "moves": SHORT_MOVES, "per_view_s": e.per_view,
+                "per_episode_s": e.per_episode(),
+                "stage_s": {"render": e.stages.render, "fusion": e.stages.fusion,
+                            "coverage": e.stages.coverage, "rest": e.stages.rest},
+                "checkpoint_s": e.checkpoint,
+                "moves_per_core_second": e.moves_per_core_second(),
+            })),
         })
     }
 }
@@ -269,6 +317,9 @@ pub fn bench_episode(
             });
         }
     }
+    let short = (settings.short_episodes > 0)
+        .then(|| short_episodes(&scene, &episode, &candidates, settings.short_episodes))
+        .transpose()?;
     Ok(EpisodeBenchReport {
         settings: settings.clone(),
         triangles: mesh.num_triangles(),
@@ -288,6 +339,67 @@ pub fn bench_episode(
         engine_all_threads_episode_seconds,
         stages,
         planners: timings,
+        short,
+    })
+}
+
+/// Runs `n` short episodes on `scene` on a one-thread pool: episode e moves to
+/// [`SHORT_MOVES`] distinct feasible candidates drawn with ChaCha8 seeded by
+/// `splitmix64(e)`, budget [`SHORT_MOVES`].
+fn short_episodes(
+    scene: &Arc<objview_episode::Scene>,
+    episode: &EpisodeSettings,
+    candidates: &Arc<Vec<Pose>>,
+    n: usize,
+) -> Result<ShortEpisodes, RunError> {
+    use rand::seq::SliceRandom;
+    use rand::SeedableRng;
+    let feasible: Vec<Pose> = candidates.iter().filter(|p| scene.space.is_feasible(p)).copied().collect();
+    let mut per_view = [0.0; SHORT_MOVES + 1];
+    let mut stage = [0.0; 4];
+    let mut checkpoint = 0.0;
+    thread_pool(1)?.install(|| -> Result<(), RunError> {
+        for e in 0..n {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(objview_geom::hash::splitmix64(e as u64));
+            let moves: Vec<Pose> = feasible.choose_multiple(&mut rng, SHORT_MOVES).copied().collect();
+            let mut script = Scripted::poses(&moves, ExecutionMode::Iterative);
+            let r = run_episode(
+                scene.clone(),
+                &mut script,
+                episode,
+                Budget::Fixed(SHORT_MOVES),
+                e as u64,
+                start_pose(3.0),
+                candidates.clone(),
+                json!({}),
+            )?;
+            let last = r.steps.len() - 1;
+            for (v, s) in r.steps.iter().enumerate() {
+                if let Some(t) = per_view.get_mut(v) {
+                    *t += s.engine_seconds;
+                }
+                for (a, &x) in stage.iter_mut().zip(&s.stage_seconds) {
+                    *a += x;
+                }
+                if v == last {
+                    stage[3] -= s.stage_seconds[3];
+                    checkpoint += s.stage_seconds[3];
+                }
+            }
+        }
+        Ok(())
+    })?;
+    let m = 1.0 / n as f64;
+    Ok(ShortEpisodes {
+        episodes: n,
+        per_view: per_view.iter().map(|t| t * m).collect(),
+        stages: StageMedians {
+            render: stage[0] * m,
+            fusion: stage[1] * m,
+            coverage: stage[2] * m,
+            rest: stage[3] * m,
+        },
+        checkpoint: checkpoint * m,
     })
 }
 
@@ -303,6 +415,7 @@ mod tests {
             gt_points: 2000,
             views: 3,
             planner_steps: 1,
+            short_episodes: 2,
         };
         let r = bench_episode(&settings, &objview_planners::registry::Registry::builtin()).unwrap();
         assert_eq!(r.engine_step_seconds.len(), 4, "the start and 3 views");
@@ -341,5 +454,20 @@ mod tests {
         assert_eq!(v["checkpoint_cd"]["each"].as_array().map(Vec::len), Some(r.checkpoint_views));
         assert_eq!(v["checkpoint_cd"]["each"][0]["view"], r.checkpoint_cd_each[0].0);
         assert_eq!(v["planners"][1]["planner"], "rse-mov");
+        // Short episodes: the start view and SHORT_MOVES moves, whose per-view times add up to
+        // the stages and the checkpoint.
+        let e = r.short.as_ref().expect("short episodes were asked for");
+        assert_eq!((e.episodes, e.per_view.len()), (2, SHORT_MOVES + 1));
+        let stages = e.stages.render + e.stages.fusion + e.stages.coverage + e.stages.rest;
+        assert!((stages + e.checkpoint - e.per_episode()).abs() < 1e-9, "{e:?}");
+        assert!(e.checkpoint > 0.0 && e.moves_per_core_second().is_finite(), "{e:?}");
+        assert_eq!(v["short_episodes"]["moves"], SHORT_MOVES);
+        assert_eq!(v["settings"]["short_episodes"], 2);
+        let none = bench_episode(
+            &EpisodeBenchSettings { short_episodes: 0, planner_steps: 0, ..settings },
+            &objview_planners::registry::Registry::builtin(),
+        )
+        .unwrap();
+        assert!(none.short.is_none() && none.to_json()["short_episodes"].is_null());
     }
 }

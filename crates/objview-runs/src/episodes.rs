@@ -150,6 +150,15 @@ impl EpisodePlan {
         Ok(probe)
     }
 
+    /// Validates the plan and returns the settings record of its lines, checked against the
+    /// results file's existing lines (a different run there is an error).
+    pub fn checked_record(&self, planners: &Registry) -> Result<Value, RunError> {
+        let probe = self.validate(planners)?;
+        let record = self.record(probe.as_ref());
+        check_same_run(&self.out, &record)?;
+        Ok(record)
+    }
+
     /// The settings record of this run's lines.
     pub fn record(&self, probe: &dyn Planner) -> Value {
         RunRecord {
@@ -213,9 +222,7 @@ impl EpisodePlan {
     /// Runs the plan's episodes into its results file.
     pub fn run(&self, planners: &Registry, progress: &dyn Progress) -> Result<RunSummary, RunError> {
         let t = Instant::now();
-        let probe = self.validate(planners)?;
-        let record = self.record(probe.as_ref());
-        check_same_run(&self.out, &record)?;
+        let record = self.checked_record(planners)?;
         let work = |obj: &ObjectRef| self.item(obj, planners, &record);
         let summary = self.drive(&self.objects, &self.space_name, work, progress)?;
         Ok(RunSummary::from_batch(&summary, t))
@@ -256,10 +263,7 @@ pub fn run_plans(
     let mut outs = Vec::with_capacity(plans.len());
     let mut existing = Vec::with_capacity(plans.len());
     for plan in plans {
-        let probe = plan.validate(planners)?;
-        let record = plan.record(probe.as_ref());
-        check_same_run(&plan.out, &record)?;
-        records.push(record);
+        records.push(plan.checked_record(planners)?);
         let (out, ex) = ResumableJsonl::open(&plan.out, "uid", plan.retry_failed)?;
         outs.push(out);
         existing.push(ex);

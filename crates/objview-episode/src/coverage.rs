@@ -31,7 +31,7 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use crate::fusion::FusedCloud;
-use crate::grid::{dist2, keyed_points, local_index, ChangedBlocks, Domain, NONE};
+use crate::grid::{box_box_dist2, dist2, keyed_points, local_index, Aabb, ChangedBlocks, Domain, NONE};
 
 /// Safety margin (units²) of the retirement test: a voxel counts as inside the ball only with
 /// this much to spare, so that a centroid rounded an ulp outside its voxel cannot matter.
@@ -253,6 +253,10 @@ impl Coverage {
         sc.who.clear();
         sc.best.clear();
         sc.xyz.iter_mut().for_each(Vec::clear);
+        // The searching targets' box and largest bound: a group at least that far from the box
+        // is beyond every one of them.
+        let mut tbox = Aabb::EMPTY;
+        let mut reach: f64 = 0.0;
         for &i in &self.live[tb as usize] {
             let iu = i as usize;
             let p = self.ix.pts[iu];
@@ -297,6 +301,8 @@ impl Coverage {
             };
             sc.who.push(i);
             sc.best.push(best);
+            tbox.grow(p);
+            reach = reach.max(best.0);
             for (c, &x) in sc.xyz.iter_mut().zip(&p) {
                 c.push(x);
             }
@@ -305,6 +311,10 @@ impl Coverage {
         let (xs, ys, zs) = (&sc.xyz[0], &sc.xyz[1], &sc.xyz[2]);
         for &(lb, gi) in &sc.cand {
             let g = &groups.blocks[gi];
+            if lb >= reach || box_box_dist2(&g.aabb, &tbox) >= reach {
+                // Each target would skip it: its distance to the group's box is at least this.
+                continue;
+            }
             for (t, best) in sc.best.iter_mut().enumerate() {
                 // `lb` bounds the distance to every later group too (a per-target walk stops).
                 if lb >= best.0 {

@@ -333,7 +333,7 @@ pub(crate) fn above(d: f64) -> f64 {
 /// computed `dist2` of any point of one to any point of the other: each per-axis gap is
 /// rounded no larger than the points' difference).
 #[inline]
-fn box_box_dist2(a: &Aabb, b: &Aabb) -> f64 {
+pub(crate) fn box_box_dist2(a: &Aabb, b: &Aabb) -> f64 {
     let mut d2 = 0.0;
     for k in 0..3 {
         let g = (b.lo[k] - a.hi[k]).max(a.lo[k] - b.hi[k]).max(0.0);

@@ -363,15 +363,11 @@ impl Coverage {
         out
     }
 
-    /// Whether an occupied voxel lies entirely within τ_min of `p`: its own, or that of its
-    /// nearest slot `nn`.
+    /// Whether the voxel of `p`'s nearest slot `nn` lies entirely within τ_min of `p`. (Its
+    /// own voxel needs no test here: [`Coverage::block_changes`] tests it first, against the
+    /// same fused cloud, and retires the target at once when it passes.)
     fn permanent(&self, fused: &FusedCloud, p: [f64; 3], nn: u32) -> bool {
-        let domain = &self.ix.domain;
-        let own = domain.key(p);
-        if fused.slot_at(own) != NONE && max_corner_d2(domain.h, own, p) < self.retire2 {
-            return true;
-        }
-        nn != NONE && max_corner_d2(domain.h, fused.key[nn as usize], p) < self.retire2
+        nn != NONE && max_corner_d2(self.ix.domain.h, fused.key[nn as usize], p) < self.retire2
     }
 }
 

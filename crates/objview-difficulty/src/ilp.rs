@@ -320,10 +320,11 @@ pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<C
             let _lock = highs_lock(&waited);
             solve_relaxation(&matrix, reduced.n_elements(), settings, remaining())
         };
-        let mut lp_values: Vec<f64> = Vec::new();
+        let (mut lp_values, mut lp_duals): (Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new());
         match lp {
-            Ok(Some((value, columns))) => {
+            Ok(Some(Relaxation { value, columns, duals })) => {
                 lp_values = columns;
+                lp_duals = duals;
                 result.lp_bound = forced as f64 + value;
                 result.lower_bound = result.lower_bound.max(forced + ceil_bound(value));
             }
@@ -343,9 +344,14 @@ pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<C
             let t = Instant::now();
             let deadline = t.checked_add(std::time::Duration::from_secs_f64(budget.min(1e9)));
             let lower = result.lower_bound - forced;
-            if let Some(out) =
-                crate::search::search_min_cover(reduced, lower, &best_reduced, &lp_values, deadline)
-            {
+            if let Some(out) = crate::search::search_min_cover(
+                reduced,
+                lower,
+                &best_reduced,
+                &lp_values,
+                &lp_duals,
+                deadline,
+            ) {
                 result.search_nodes = out.nodes;
                 result.search_seconds = t.elapsed().as_secs_f64();
                 let lifted = red.lift(&out.cover);
@@ -516,18 +522,30 @@ fn build_model(
     Ok(model)
 }
 
-/// LP relaxation optimum and its column values; `Ok(None)` when the time limit stopped it.
+/// An optimal LP relaxation: its value, column values and row duals.
+struct Relaxation {
+    value: f64,
+    columns: Vec<f64>,
+    duals: Vec<f64>,
+}
+
+/// The LP relaxation's optimum; `Ok(None)` when the time limit stopped it.
 fn solve_relaxation(
     matrix: &[Vec<usize>],
     n_rows: usize,
     settings: &CoverSettings,
     time_limit: f64,
-) -> Result<Option<(f64, Vec<f64>)>, String> {
+) -> Result<Option<Relaxation>, String> {
     let model = build_model(matrix, n_rows, false, settings, time_limit)?;
     let solved = model.try_solve().map_err(|s| format!("HiGHS run failed: {s:?}"))?;
     match solved.status() {
         HighsModelStatus::Optimal => {
-            Ok(Some((solved.objective_value(), solved.get_solution().columns().to_vec())))
+            let solution = solved.get_solution();
+            Ok(Some(Relaxation {
+                value: solved.objective_value(),
+                columns: solution.columns().to_vec(),
+                duals: solution.dual_rows().to_vec(),
+            }))
         }
         HighsModelStatus::ReachedTimeLimit => Ok(None),
         other => Err(format!("HiGHS model status {other:?}")),

@@ -12,7 +12,16 @@
 //!   number of views so that the packing bound below sees the most constrained rows first;
 //! - a node is (chosen views, allowed views, rows still uncovered). It fails when some row has no
 //!   allowed view, or when a *packing bound* exceeds the views left: uncovered rows whose allowed
-//!   view sets are pairwise disjoint each need their own view;
+//!   view sets are pairwise disjoint each need their own view. One pass over the parent's rows
+//!   builds the node's rows and tests both as it goes, so a failing node (most of them) stops at
+//!   the first rows, the most constrained ones;
+//! - it also fails on a *dual bound*: with weights y ≥ 0 on the rows (the LP relaxation's row
+//!   duals, when given) scaled so that no view's rows weigh more than 1, every view covers at
+//!   most 1 of the uncovered rows' weight, so more weight than views left means no cover (the
+//!   packing bound is the special case of 0/1 weights). Any y ≥ 0 is valid after the scaling,
+//!   which is done in integer fixed point, so LP round-off can weaken the bound but never make
+//!   it wrong. A child whose parent's uncovered weight minus the view's whole load already
+//!   exceeds its views left is not visited;
 //! - it branches on the uncovered row with the fewest allowed views: child i takes that row's
 //!   i-th view (views ordered by how many uncovered rows they cover, descending) and later
 //!   children exclude the earlier views, so each cover is enumerated at most once;
@@ -29,6 +38,9 @@ use crate::setcover::CoverInstance;
 
 /// Largest number of views (columns) the search handles.
 pub const SEARCH_MAX_VIEWS: usize = 128;
+
+/// Fixed-point scale of the dual weights: a dual value of 1 (the most a row can carry).
+const DUAL_SCALE: u64 = 1 << 32;
 
 /// Nodes between two deadline checks.
 const DEADLINE_CHECK_NODES: u64 = 1024;
@@ -53,13 +65,17 @@ pub struct SearchOutcome {
 /// the search tries sizes from the larger of `lower` and its own root bound up to
 /// `incumbent.len() − 1`. `priority` (one value per column of `inst`, e.g. the LP relaxation's
 /// solution; empty for none) orders the branches: higher first, then more rows covered. It
-/// changes how fast a cover is found, never the optimum. Stops at `deadline` (if any) with
+/// changes how fast a cover is found, never the optimum. `row_dual` (one value per row of
+/// `inst`, e.g. the LP relaxation's row duals; empty, negative or non-finite values count as 0)
+/// weighs the rows for the dual bound: it only prunes branches that hold no cover, so it
+/// changes the work, never the cover found. Stops at `deadline` (if any) with
 /// `optimal = false`.
 pub fn search_min_cover(
     inst: &CoverInstance,
     lower: usize,
     incumbent: &[usize],
     priority: &[f64],
+    row_dual: &[f64],
     deadline: Option<Instant>,
 ) -> Option<SearchOutcome> {
     let n_views = inst.n_views();
@@ -82,8 +98,35 @@ pub fn search_min_cover(
             masks[row] |= 1u128 << c;
         }
     }
-    masks.sort_unstable_by_key(|m| (m.count_ones(), *m));
-    masks.dedup();
+    // Dual weights in fixed point, rows sorted (most constrained first) and deduplicated.
+    let weight = |row: usize| {
+        let y = row_dual.get(row).copied().unwrap_or(0.0);
+        if y > 0.0 && y.is_finite() {
+            (y.min(1.0) * DUAL_SCALE as f64) as u64
+        } else {
+            0
+        }
+    };
+    let mut rows: Vec<(u128, u64)> = masks.iter().enumerate().map(|(r, &m)| (m, weight(r))).collect();
+    rows.sort_unstable_by_key(|&(m, _)| (m.count_ones(), m));
+    rows.dedup_by(|b, a| {
+        // Duplicates are covered together: one row carrying both weights.
+        let same = a.0 == b.0;
+        if same {
+            a.1 += b.1;
+        }
+        same
+    });
+    let root: Vec<Row> = rows.into_iter().map(|(mask, weight)| Row { mask, weight }).collect();
+    // Each view's load (the weight of its rows); dividing by the largest (or by the scale, if
+    // larger) makes the weights a feasible dual whatever the LP's rounding.
+    let mut load = vec![0u64; n_views];
+    for r in &root {
+        for c in ones(r.mask) {
+            load[c] += r.weight;
+        }
+    }
+    let denom = load.iter().copied().max().unwrap_or(0).max(DUAL_SCALE);
     let all: u128 = if n_views == 128 { u128::MAX } else { (1u128 << n_views) - 1 };
 
     // Priority ranks: 0 = highest priority value (ties by column).
@@ -97,19 +140,19 @@ pub fn search_min_cover(
     }
     let mut s = Search {
         rank,
-        masks,
+        denom,
+        load,
         levels: vec![Vec::new(); n_views + 2],
         nodes: 0,
         deadline,
         stopped: false,
         found: 0,
     };
-    let root: Vec<u32> = (0..s.masks.len() as u32).collect();
-    let root_bound = s.packing(&root, all) as usize;
+    let root_weight: u64 = root.iter().map(|r| r.weight).sum();
+    let root_bound = (packing(&root, all) as usize).max(root_weight.div_ceil(denom) as usize);
     let mut k = lower.max(root_bound).max(1);
     while k < incumbent.len() {
-        s.levels[0] = root.clone();
-        if s.dfs(0, 0, all, k as u32) {
+        if s.dfs(0, &root, 0, 0, all, k as u32) {
             let mut cover: Vec<usize> = ones(s.found).map(|c| inst.view_ids()[c]).collect();
             cover.sort_unstable();
             debug_assert!(inst.is_cover(&cover) && cover.len() <= k);
@@ -135,13 +178,22 @@ fn ones(mut m: u128) -> impl Iterator<Item = usize> {
     })
 }
 
+/// A row as the search carries it: the views covering it and its dual weight (fixed point).
+#[derive(Debug, Clone, Copy)]
+struct Row {
+    mask: u128,
+    weight: u64,
+}
+
 struct Search {
     /// Per column: its priority rank (lower first; all 0 without priorities).
     rank: Vec<u32>,
-    /// Per row: the views covering it, sorted by view count.
-    masks: Vec<u128>,
-    /// Uncovered rows per depth (buffers reused across nodes).
-    levels: Vec<Vec<u32>>,
+    /// The dual weights' denominator: every view's load is at most it.
+    denom: u64,
+    /// Per column: its load, the weight of all rows it covers.
+    load: Vec<u64>,
+    /// Uncovered rows per depth, in the root's order (buffers reused across nodes).
+    levels: Vec<Vec<Row>>,
     nodes: u64,
     deadline: Option<Instant>,
     stopped: bool,
@@ -149,23 +201,32 @@ struct Search {
     found: u128,
 }
 
-impl Search {
-    /// Greedy packing of `rows` (in their sorted order) with pairwise disjoint allowed views.
-    fn packing(&self, rows: &[u32], allowed: u128) -> u32 {
-        let mut used = 0u128;
-        let mut pack = 0;
-        for &r in rows {
-            let a = self.masks[r as usize] & allowed;
-            if a & used == 0 {
-                pack += 1;
-                used |= a;
-            }
+/// Greedy packing of `rows` (in their sorted order) with pairwise disjoint allowed views.
+fn packing(rows: &[Row], allowed: u128) -> u32 {
+    let mut used = 0u128;
+    let mut pack = 0;
+    for r in rows {
+        let a = r.mask & allowed;
+        if a & used == 0 {
+            pack += 1;
+            used |= a;
         }
-        pack
     }
+    pack
+}
 
-    /// Whether the rows of `levels[depth]` have a cover of at most `k_left` allowed views.
-    fn dfs(&mut self, depth: usize, chosen: u128, allowed: u128, k_left: u32) -> bool {
+impl Search {
+    /// Whether the rows of `parent` not covered by view mask `bit` (all of them when `bit` is 0)
+    /// have a cover of at most `k_left` allowed views. The node's rows go to `levels[depth]`.
+    fn dfs(
+        &mut self,
+        depth: usize,
+        parent: &[Row],
+        bit: u128,
+        chosen: u128,
+        allowed: u128,
+        k_left: u32,
+    ) -> bool {
         self.nodes += 1;
         if self.nodes % DEADLINE_CHECK_NODES == 0 && self.deadline.is_some_and(|d| Instant::now() >= d) {
             self.stopped = true;
@@ -173,27 +234,40 @@ impl Search {
         if self.stopped {
             return false;
         }
-        let rows = std::mem::take(&mut self.levels[depth]);
-        let result = self.expand(depth, &rows, chosen, allowed, k_left);
+        let mut rows = std::mem::take(&mut self.levels[depth]);
+        rows.clear();
+        let result = self.expand(depth, parent, bit, &mut rows, chosen, allowed, k_left);
         self.levels[depth] = rows;
         result
     }
 
-    fn expand(&mut self, depth: usize, rows: &[u32], chosen: u128, allowed: u128, k_left: u32) -> bool {
-        if rows.is_empty() {
-            self.found = chosen;
-            return true;
-        }
-        if k_left == 0 {
-            return false;
-        }
-        // One pass: infeasible rows, the branching row, the common views, the packing bound.
+    /// The body of [`Search::dfs`]: one pass over the parent's rows collects the node's rows
+    /// and, as it goes, fails the node on a row without allowed views or on a packing bound
+    /// above `k_left` (rows come most constrained first, so pruned nodes mostly stop early);
+    /// then the dual bound, the one-view test, and the branches.
+    #[allow(clippy::too_many_arguments)]
+    fn expand(
+        &mut self,
+        depth: usize,
+        parent: &[Row],
+        bit: u128,
+        rows: &mut Vec<Row>,
+        chosen: u128,
+        allowed: u128,
+        k_left: u32,
+    ) -> bool {
         let mut used = 0u128;
         let mut pack = 0u32;
         let mut branch = (u32::MAX, 0u128);
         let mut common = u128::MAX;
-        for &r in rows {
-            let a = self.masks[r as usize] & allowed;
+        let mut weight = 0u64;
+        for &r in parent {
+            if r.mask & bit != 0 {
+                continue;
+            }
+            rows.push(r);
+            weight += r.weight;
+            let a = r.mask & allowed;
             if a == 0 {
                 return false;
             }
@@ -205,9 +279,17 @@ impl Search {
             if a & used == 0 {
                 pack += 1;
                 used |= a;
+                if pack > k_left {
+                    return false;
+                }
             }
         }
-        if pack > k_left {
+        if rows.is_empty() {
+            self.found = chosen;
+            return true;
+        }
+        // Uncovered rows carry more dual weight than `k_left` views can hold.
+        if k_left == 0 || weight > k_left as u64 * self.denom {
             return false;
         }
         if k_left == 1 {
@@ -220,8 +302,8 @@ impl Search {
         // Candidate views of the branching row, by uncovered rows covered (descending).
         let candidates = branch.1;
         let mut order: Vec<(u32, u32)> = ones(candidates).map(|c| (0, c as u32)).collect();
-        for &r in rows {
-            let m = self.masks[r as usize] & candidates;
+        for r in rows.iter() {
+            let m = r.mask & candidates;
             if m != 0 {
                 for o in order.iter_mut() {
                     o.0 += (m >> o.1 & 1) as u32;
@@ -235,11 +317,10 @@ impl Search {
         let mut allowed = allowed;
         for &(_, v) in &order {
             let bit = 1u128 << v;
-            let mut next = std::mem::take(&mut self.levels[depth + 1]);
-            next.clear();
-            next.extend(rows.iter().copied().filter(|&r| self.masks[r as usize] & bit == 0));
-            self.levels[depth + 1] = next;
-            if self.dfs(depth + 1, chosen | bit, allowed, k_left - 1) {
+            // The child's rows weigh at least `weight` − v's load: no need to visit it when
+            // that already exceeds what its `k_left − 1` views can hold.
+            let hopeless = weight.saturating_sub(self.load[v as usize]) > (k_left - 1) as u64 * self.denom;
+            if !hopeless && self.dfs(depth + 1, rows, bit, chosen | bit, allowed, k_left - 1) {
                 return true;
             }
             if self.stopped {
@@ -274,17 +355,71 @@ mod tests {
             let inst = inst(&views);
             let brute = inst.brute_force().unwrap();
             let greedy = inst.greedy();
-            let out = search_min_cover(&inst, 0, &greedy, &[], None).unwrap();
+            let out = search_min_cover(&inst, 0, &greedy, &[], &[], None).unwrap();
             assert!(out.optimal, "case {case}");
             assert_eq!(out.cover.len(), brute.len(), "case {case}: {views:?}");
             assert!(inst.is_cover(&out.cover), "case {case}");
             assert_eq!(out.lower_bound, brute.len());
             // Branch priorities change the order of the search, never the optimum.
             let priority: Vec<f64> = (0..inst.n_views()).map(|_| rng.gen_range(0.0..1.0)).collect();
-            let out = search_min_cover(&inst, 0, &greedy, &priority, None).unwrap();
+            let out = search_min_cover(&inst, 0, &greedy, &priority, &[], None).unwrap();
             assert_eq!((out.cover.len(), out.optimal), (brute.len(), true), "case {case} with priorities");
             assert!(inst.is_cover(&out.cover));
         }
+    }
+
+    #[test]
+    fn dual_weights_change_the_work_never_the_cover() {
+        let mut rng = ChaCha8Rng::seed_from_u64(12);
+        let mut pruned = 0u64;
+        for case in 0..400 {
+            let n_views = rng.gen_range(1..=16);
+            let n_el = rng.gen_range(1..50);
+            let p = rng.gen_range(0.1..0.5);
+            let views: Vec<Vec<usize>> =
+                (0..n_views).map(|_| (0..n_el).filter(|_| rng.gen_bool(p)).collect()).collect();
+            let inst = inst(&views);
+            let brute = inst.brute_force().unwrap();
+            let greedy = inst.greedy();
+            let plain = search_min_cover(&inst, 0, &greedy, &[], &[], None).unwrap();
+            // Any weights: feasible duals, infeasible ones (the scaling must absorb them), and
+            // garbage (negative, NaN, infinite: counted as 0).
+            let rows = inst.n_elements();
+            let duals: Vec<f64> = match case % 4 {
+                0 => (0..rows).map(|_| rng.gen_range(0.0..0.3)).collect(),
+                1 => vec![1.0; rows],
+                2 => (0..rows).map(|_| rng.gen_range(0.0..5.0)).collect(),
+                _ => (0..rows).map(|i| [f64::NAN, -1.0, f64::INFINITY, 0.5, 1e-300][i % 5]).collect(),
+            };
+            let weighted = search_min_cover(&inst, 0, &greedy, &[], &duals, None).unwrap();
+            assert!(weighted.optimal, "case {case}");
+            assert_eq!(weighted.cover.len(), brute.len(), "case {case}: {views:?} {duals:?}");
+            // Pruning only drops branches without a cover: the same first cover.
+            assert_eq!(weighted.cover, plain.cover, "case {case}");
+            assert!(weighted.nodes <= plain.nodes, "case {case}");
+            pruned += plain.nodes - weighted.nodes;
+        }
+        assert!(pruned > 0, "the weights never pruned anything");
+    }
+
+    #[test]
+    fn fractional_duals_prove_what_packing_cannot() {
+        // A triangle: every two elements share a view, so the packing bound is 1; the LP dual
+        // (½ on each element) proves 2 at the root.
+        let inst = inst(&[vec![0, 1], vec![1, 2], vec![0, 2]]);
+        let plain = search_min_cover(&inst, 0, &[0, 1], &[], &[], None).unwrap();
+        assert_eq!((plain.cover.len(), plain.optimal), (2, true));
+        assert!(plain.nodes > 0);
+        let dual = search_min_cover(&inst, 0, &[0, 1], &[], &[0.5, 0.5, 0.5], None).unwrap();
+        assert_eq!((dual.cover.len(), dual.optimal, dual.lower_bound, dual.nodes), (2, true, 2, 0));
+        // Weights above a feasible dual are scaled down: 1 on each element weighs 2 per view,
+        // so the bound is 3/2 → 2 as well, never 3.
+        let scaled = search_min_cover(&inst, 0, &[0, 1], &[], &[1.0, 1.0, 1.0], None).unwrap();
+        assert_eq!((scaled.cover.len(), scaled.optimal, scaled.nodes), (2, true, 0));
+        // Three disjoint views, greedy incumbent 3: weights of 1 are feasible and prove 3.
+        let disjoint = inst_of(&[vec![0], vec![1], vec![2]]);
+        let out = search_min_cover(&disjoint, 0, &[0, 1, 2], &[], &[1.0; 3], None).unwrap();
+        assert_eq!((out.cover.len(), out.optimal, out.nodes), (3, true, 0));
     }
 
     #[test]
@@ -293,10 +428,10 @@ mod tests {
         let inst = inst(&[vec![0, 1, 2, 3, 6], vec![4, 5, 7, 8, 9], vec![0, 1, 4, 5, 2, 7]]);
         let greedy = inst.greedy();
         assert_eq!(greedy.len(), 3);
-        let out = search_min_cover(&inst, 0, &greedy, &[], None).unwrap();
+        let out = search_min_cover(&inst, 0, &greedy, &[], &[], None).unwrap();
         assert_eq!((out.cover.clone(), out.optimal, out.lower_bound), (vec![0, 1], true, 2));
         // A lower bound equal to the incumbent proves it immediately.
-        let out = search_min_cover(&inst, 2, &[0, 1], &[], None).unwrap();
+        let out = search_min_cover(&inst, 2, &[0, 1], &[], &[], None).unwrap();
         assert_eq!((out.optimal, out.nodes), (true, 0));
     }
 
@@ -306,7 +441,7 @@ mod tests {
         let views: Vec<Vec<usize>> = (0..128).map(|v| vec![v, (v + 127) % 128]).collect();
         let inst = inst(&views);
         let greedy = inst.greedy();
-        let out = search_min_cover(&inst, 0, &greedy, &[], None).unwrap();
+        let out = search_min_cover(&inst, 0, &greedy, &[], &[], None).unwrap();
         assert!(out.optimal);
         assert_eq!(out.cover.len(), 64);
         // The root packing bound already proves 64 (64 disjoint pairs).
@@ -315,7 +450,7 @@ mod tests {
         // An instance too large for the search.
         let big: Vec<Vec<usize>> = (0..129).map(|v| vec![v]).collect();
         let big = inst_of(&big);
-        assert!(search_min_cover(&big, 0, &(0..129).collect::<Vec<_>>(), &[], None).is_none());
+        assert!(search_min_cover(&big, 0, &(0..129).collect::<Vec<_>>(), &[], &[], None).is_none());
 
         // A deadline in the past stops the search on its first check with a valid bound.
         let mut rng = ChaCha8Rng::seed_from_u64(3);
@@ -323,7 +458,7 @@ mod tests {
             (0..128).map(|_| (0..2000).filter(|_| rng.gen_bool(0.05)).collect()).collect();
         let hard = inst_of(&views);
         let g = hard.greedy();
-        let out = search_min_cover(&hard, 0, &g, &[], Some(Instant::now())).unwrap();
+        let out = search_min_cover(&hard, 0, &g, &[], &[], Some(Instant::now())).unwrap();
         if !out.optimal {
             assert_eq!(out.cover.len(), g.len());
             assert!(out.lower_bound < g.len());

@@ -649,13 +649,29 @@ mod tests {
         let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.05);
         let tp = patch(&mut rng, 5000);
         let t = Targets::new(domain, &tp, 0.01).unwrap();
-        let pts = patch(&mut rng, 800);
-        for tau in [0.004, 0.01, 0.023] {
-            let mut bits = vec![0u64; t.len().div_ceil(64)];
-            t.mark_within(&pts, tau, &mut bits);
-            for (i, &p) in t.points().iter().enumerate() {
-                let want = pts.iter().any(|&q| dist2(p, q) < tau * tau);
-                assert_eq!(bits[i / 64] >> (i % 64) & 1 == 1, want, "tau {tau} target {i}");
+        // Sparse points (mostly one per voxel) and dense ones (many per voxel, as a fused view).
+        for n in [800, 20_000] {
+            let pts: Vec<[f64; 3]> = if n < 1000 {
+                patch(&mut rng, n)
+            } else {
+                (0..n)
+                    .map(|_| {
+                        let p = tp[rng.gen_range(0..tp.len())];
+                        std::array::from_fn(|a| p[a] + rng.gen_range(-0.02..0.02))
+                    })
+                    .collect()
+            };
+            for tau in [0.004, 0.01, 0.023] {
+                let mut bits = vec![0u64; t.len().div_ceil(64)];
+                t.mark_within(&pts, tau, &mut bits);
+                let mut marked = 0;
+                for (i, &p) in t.points().iter().enumerate() {
+                    let want = pts.iter().any(|&q| dist2(p, q) < tau * tau);
+                    assert_eq!(bits[i / 64] >> (i % 64) & 1 == 1, want, "n {n} tau {tau} target {i}");
+                    marked += want as usize;
+                }
+                // Neither trivial case (the largest τ may reach every target of the dense set).
+                assert!(marked > 0 && (marked < t.len() || tau > 0.02), "n {n} tau {tau}: {marked}");
             }
         }
     }
@@ -687,17 +703,32 @@ impl Targets {
 
     /// Sets bit i of `bits` (targets in [`Targets::points`] order, 64 per word) for every
     /// target strictly closer than `tau` to one of `points` — the coverage of one fused view
-    /// without distance bookkeeping (the oracle's per-candidate gains). Each point visits the
-    /// fine voxels within ⌈τ/h⌉ of its own, as runs along x that are contiguous in the sorted
-    /// targets.
+    /// without distance bookkeeping (the oracle's per-candidate gains).
+    ///
+    /// The points are grouped by their fine voxel; each group visits the fine voxels within
+    /// ⌈τ/h⌉ of its own once, as runs along x that are contiguous in the sorted targets, and
+    /// tests each target not yet marked against the group's points until one is close enough.
+    /// A target is marked iff some point of some group is within τ: the same bits as testing
+    /// every point against its own neighbourhood, with one walk per voxel instead of one per
+    /// point and no test of a target already marked.
     pub fn mark_within(&self, points: &[[f64; 3]], tau: f64, bits: &mut [u64]) {
         let t2 = tau * tau;
         let r = (tau / self.ix.domain.h).ceil() as i32;
-        for &q in points {
-            self.ix.for_runs_around(self.ix.domain.key(q), r, |_, lo, hi| {
+        let mut keyed: Vec<([i32; 3], u32)> =
+            points.iter().enumerate().map(|(j, &q)| (self.ix.domain.key(q), j as u32)).collect();
+        keyed.sort_unstable();
+        let mut group: Vec<[f64; 3]> = Vec::new();
+        for run in keyed.chunk_by(|a, b| a.0 == b.0) {
+            group.clear();
+            group.extend(run.iter().map(|&(_, j)| points[j as usize]));
+            self.ix.for_runs_around(run[0].0, r, |_, lo, hi| {
                 for i in lo..hi {
-                    if dist2(self.ix.pts[i as usize], q) < t2 {
-                        bits[i as usize / 64] |= 1 << (i % 64);
+                    let (w, b) = (i as usize / 64, 1u64 << (i % 64));
+                    if bits[w] & b == 0 {
+                        let p = self.ix.pts[i as usize];
+                        if group.iter().any(|&q| dist2(p, q) < t2) {
+                            bits[w] |= b;
+                        }
                     }
                 }
             });

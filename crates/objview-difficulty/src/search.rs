@@ -345,15 +345,25 @@ mod tests {
         CoverInstance::from_index_lists(views, 1).unwrap()
     }
 
+    /// Random view lists: a view count in `views`, an element count in `elements`, and each
+    /// element in each view with a probability drawn from `p`.
+    fn random_views(
+        rng: &mut ChaCha8Rng,
+        views: std::ops::RangeInclusive<usize>,
+        elements: std::ops::Range<usize>,
+        p: std::ops::Range<f64>,
+    ) -> Vec<Vec<usize>> {
+        let n_views = rng.gen_range(views);
+        let n_el = rng.gen_range(elements);
+        let p = rng.gen_range(p);
+        (0..n_views).map(|_| (0..n_el).filter(|_| rng.gen_bool(p)).collect()).collect()
+    }
+
     #[test]
     fn matches_brute_force_on_random_instances() {
         let mut rng = ChaCha8Rng::seed_from_u64(11);
         for case in 0..400 {
-            let n_views = rng.gen_range(1..=18);
-            let n_el = rng.gen_range(0..60);
-            let p = rng.gen_range(0.05..0.5);
-            let views: Vec<Vec<usize>> =
-                (0..n_views).map(|_| (0..n_el).filter(|_| rng.gen_bool(p)).collect()).collect();
+            let views = random_views(&mut rng, 1..=18, 0..60, 0.05..0.5);
             let inst = inst(&views);
             let brute = inst.brute_force().unwrap();
             let greedy = inst.greedy();
@@ -375,11 +385,7 @@ mod tests {
         let mut rng = ChaCha8Rng::seed_from_u64(12);
         let mut pruned = 0u64;
         for case in 0..400 {
-            let n_views = rng.gen_range(1..=16);
-            let n_el = rng.gen_range(1..50);
-            let p = rng.gen_range(0.1..0.5);
-            let views: Vec<Vec<usize>> =
-                (0..n_views).map(|_| (0..n_el).filter(|_| rng.gen_bool(p)).collect()).collect();
+            let views = random_views(&mut rng, 1..=16, 1..50, 0.1..0.5);
             let inst = inst(&views);
             let brute = inst.brute_force().unwrap();
             let greedy = inst.greedy();

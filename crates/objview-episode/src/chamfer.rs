@@ -649,21 +649,19 @@ mod tests {
         let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.05);
         let tp = patch(&mut rng, 5000);
         let t = Targets::new(domain, &tp, 0.01).unwrap();
-        // Sparse points (mostly one per voxel) and dense ones (many per voxel, as a fused view).
-        for n in [800, 20_000] {
-            let pts: Vec<[f64; 3]> = if n < 1000 {
-                patch(&mut rng, n)
-            } else {
-                (0..n)
-                    .map(|_| {
-                        let p = tp[rng.gen_range(0..tp.len())];
-                        std::array::from_fn(|a| p[a] + rng.gen_range(-0.02..0.02))
-                    })
-                    .collect()
-            };
+        // Sparse points (mostly one per voxel) and dense ones around the targets (many per
+        // voxel, as a fused view).
+        let sparse = patch(&mut rng, 800);
+        let dense: Vec<[f64; 3]> = (0..20_000)
+            .map(|_| {
+                let p = tp[rng.gen_range(0..tp.len())];
+                std::array::from_fn(|a| p[a] + rng.gen_range(-0.02..0.02))
+            })
+            .collect();
+        for (n, pts) in [("sparse", &sparse), ("dense", &dense)] {
             for tau in [0.004, 0.01, 0.023] {
                 let mut bits = vec![0u64; t.len().div_ceil(64)];
-                t.mark_within(&pts, tau, &mut bits);
+                t.mark_within(pts, tau, &mut bits);
                 let mut marked = 0;
                 for (i, &p) in t.points().iter().enumerate() {
                     let want = pts.iter().any(|&q| dist2(p, q) < tau * tau);

@@ -342,10 +342,90 @@ pub(crate) fn box_box_dist2(a: &Aabb, b: &Aabb) -> f64 {
     d2
 }
 
-/// Scratch of [`nearest_in_block`]: the candidate blocks of one group with their lower bounds.
+/// Scratch of [`nearest_in_block`]: the candidate blocks of one group with their lower bounds,
+/// and the slab of each candidate that was scanned.
 #[derive(Default)]
 pub struct BlockSearch {
     cand: Vec<(f64, [i32; 3], Aabb)>,
+    slabs: Vec<Option<Slab>>,
+}
+
+/// A slab around the points of one block: every point q has |n·(q − c)| ≤ t (n a unit vector),
+/// so |p − q| ≥ |n·(p − c)| − t for any p. On a smooth surface patch with n near its normal the
+/// slab is thin, and this bound is far tighter than the block's box for points that lie far
+/// off the surface (the inside of a sealed shell), which otherwise scan every block whose box
+/// reaches within their distance.
+#[derive(Debug, Clone, Copy)]
+struct Slab {
+    n: [f64; 3],
+    c: [f64; 3],
+    t: f64,
+}
+
+impl Slab {
+    /// The slab that bounds nothing (`lb2` is always 0).
+    const NONE: Slab = Slab { n: [1.0, 0.0, 0.0], c: [0.0; 3], t: f64::INFINITY };
+
+    /// The slab of the points of block `b` (four passes over them): the plane through their
+    /// centroid, the point farthest from it and the point farthest from that line, and the
+    /// largest distance of a point from that plane; None when fewer than 3 points or no plane.
+    fn of_block<S: Bucketed>(set: &S, b: [i32; 3]) -> Option<Slab> {
+        let mut sum = [0.0; 3];
+        let mut k = 0usize;
+        set.for_block(b, |_, q| {
+            for a in 0..3 {
+                sum[a] += q[a];
+            }
+            k += 1;
+        });
+        if k < 3 {
+            return None;
+        }
+        let c = sum.map(|x| x / k as f64);
+        // The plane through c, the point farthest from c and the point farthest from that line.
+        let mut far = ([0.0; 3], 0.0);
+        set.for_block(b, |_, q| {
+            let d = dist2(q, c);
+            if d > far.1 {
+                far = ([q[0] - c[0], q[1] - c[1], q[2] - c[2]], d);
+            }
+        });
+        let u = far.0;
+        let mut best = ([0.0; 3], 0.0);
+        set.for_block(b, |_, q| {
+            let v = [q[0] - c[0], q[1] - c[1], q[2] - c[2]];
+            let w = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+            let m = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
+            if m > best.1 {
+                best = (w, m);
+            }
+        });
+        if best.1 <= 0.0 || !best.1.is_finite() {
+            return None;
+        }
+        let norm = best.1.sqrt();
+        let n = best.0.map(|x| x / norm);
+        let mut t: f64 = 0.0;
+        set.for_block(b, |_, q| {
+            t = t.max((n[0] * (q[0] - c[0]) + n[1] * (q[1] - c[1]) + n[2] * (q[2] - c[2])).abs());
+        });
+        Some(Slab { n, c, t })
+    }
+
+    /// A lower bound of d² from `p` to every point of the slab's block. Rounding: the dot
+    /// products err by far less than the margin taken off (1e-9 of the coordinates' scale, and
+    /// |n| may exceed 1 by an ulp), so the bound never exceeds a true distance.
+    #[inline]
+    fn lb2(&self, p: [f64; 3]) -> f64 {
+        let s =
+            self.n[0] * (p[0] - self.c[0]) + self.n[1] * (p[1] - self.c[1]) + self.n[2] * (p[2] - self.c[2]);
+        let d = (s.abs() - self.t) * (1.0 - 1e-9) - 1e-9;
+        if d > 0.0 {
+            d * d
+        } else {
+            0.0
+        }
+    }
 }
 
 /// [`nearest_in`] for every point of `pts`, which should all lie in one block of `set`'s grid
@@ -355,7 +435,11 @@ pub struct BlockSearch {
 /// first point's nearest neighbour `q₀` bounds every point's answer by its distance to `q₀`,
 /// the blocks that could beat that bound for some point of the group are gathered once and
 /// sorted by their distance to the group's box, and each point scans them in that order (each
-/// starting from its predecessor's answer) until the next block's bound reaches its best.
+/// starting from its predecessor's answer) until the next block's bound reaches its best. A
+/// block is skipped when its box, or its slab ([`Slab`]: on a smooth surface far thinner than
+/// the box), is no closer than the point's best so far: for points far off the surface (the
+/// inside of a sealed shell) a box bound lets every block within the answer's distance plus
+/// the box's depth through, a slab only those near the answer.
 pub fn nearest_in_block<S: Bucketed>(
     set: &S,
     pts: &[[f64; 3]],
@@ -418,12 +502,23 @@ pub fn nearest_in_block<S: Bucketed>(
         if !gathered {
             gathered = true;
             gather_candidates(set, bk, &gbox, reach, &mut scratch.cand);
+            scratch.slabs.clear();
+            scratch.slabs.resize(scratch.cand.len(), None);
         }
-        for (lb, b, aabb) in scratch.cand.iter() {
+        for (c, (lb, b, aabb)) in scratch.cand.iter().enumerate() {
             if *lb >= best.0 {
                 break;
             }
             if aabb.dist2(p) >= best.0 {
+                continue;
+            }
+            // The block's slab, made when a point first scans it. A box that is thin along an
+            // axis (a patch of an axis-aligned face) already bounds as well as a slab could.
+            let slab = scratch.slabs[c].get_or_insert_with(|| {
+                let thin = (0..3).any(|a| aabb.hi[a] - aabb.lo[a] < 0.25 * domain.h);
+                (!thin).then(|| Slab::of_block(set, *b)).flatten().unwrap_or(Slab::NONE)
+            });
+            if slab.lb2(p) >= best.0 {
                 continue;
             }
             set.for_block(*b, |i, q| consider(&mut best, i, q));
@@ -755,19 +850,78 @@ mod tests {
     }
 
     #[test]
+    fn slabs_bound_their_blocks() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.0);
+        let e = domain.h * BLOCK as f64;
+        let mut tight = 0;
+        for trial in 0..400 {
+            let bk = [0; 3].map(|_: i32| rng.gen_range(-14..14));
+            let lo = domain.cube_box(bk, BLOCK).lo;
+            let inside = |u: [f64; 3]| [0, 1, 2].map(|a| lo[a] + (0.001 + 0.998 * u[a]) * e);
+            // A tilted plane, a curved patch, a line, one repeated point, or a cloud, by trial.
+            let n = rng.gen_range(1..120);
+            let tilt: [f64; 2] = [rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5)];
+            let pts: Vec<[f64; 3]> = (0..n)
+                .map(|_| {
+                    let (x, y) = (rng.gen_range(0.0..1.0), rng.gen_range(0.0..1.0));
+                    let z = match trial % 5 {
+                        0 => 0.5 + tilt[0] * (x - 0.5) + tilt[1] * (y - 0.5),
+                        1 => 0.3 + 0.4 * ((x - 0.5) * (x - 0.5) + (y - 0.5) * (y - 0.5)),
+                        2 => return inside([x, x, x]),
+                        3 => return inside([0.4, 0.6, 0.5]),
+                        _ => rng.gen_range(0.0..1.0),
+                    };
+                    inside([x, y, z])
+                })
+                .collect();
+            let mut set = FusedCloud::new(domain.clone());
+            set.insert(&pts);
+            let slab = Slab::of_block(&set, bk);
+            let all: Vec<[f64; 3]> = set.pos.clone();
+            if trial % 5 == 3 || all.len() < 3 {
+                assert!(slab.is_none(), "trial {trial}: {} points span no plane", all.len());
+                continue;
+            }
+            // Points on a line may still give a slab (rounding leaves a tiny cross product):
+            // any unit normal bounds, so it must bound too.
+            let Some(slab) = slab else { continue };
+            for _ in 0..50 {
+                let p: [f64; 3] = [0; 3].map(|_: i32| rng.gen_range(-0.7..0.7));
+                let want = all.iter().map(|&q| dist2(p, q)).fold(f64::INFINITY, f64::min);
+                assert!(slab.lb2(p) <= want, "trial {trial}: {} > {want}", slab.lb2(p));
+                if trial % 5 == 0 && slab.lb2(p) > 0.5 * want {
+                    tight += 1;
+                }
+            }
+        }
+        // On a plane the slab is as thin as the plane: the bound is most of the distance for
+        // many queries (a box around a tilted patch is not).
+        assert!(tight > 1000, "{tight}");
+    }
+
+    #[test]
     fn block_searches_find_what_brute_force_finds() {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(31);
         let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.0);
-        // Two patches of surface (one moved by a second insertion) and a lone far point, so
-        // that queries meet near answers, far answers and answers in other superblocks.
+        // Patches of surface — flat and axis-aligned (thin boxes), tilted, curved (slabs) — one
+        // moved by a second insertion, and a lone far point, so that queries meet near answers,
+        // far answers and answers in other superblocks.
         let mut fused = FusedCloud::new(domain.clone());
-        let patch = |rng: &mut rand_chacha::ChaCha8Rng, c: [f64; 3], n: usize| -> Vec<[f64; 3]> {
-            (0..n).map(|_| [c[0] + rng.gen_range(-0.1..0.1), c[1] + rng.gen_range(-0.1..0.1), c[2]]).collect()
+        let patch = |rng: &mut rand_chacha::ChaCha8Rng, c: [f64; 3], n: usize, tilt: f64, bend: f64| {
+            (0..n)
+                .map(|_| {
+                    let (x, y) = (rng.gen_range(-0.1..0.1), rng.gen_range(-0.1..0.1));
+                    [c[0] + x, c[1] + y, c[2] + tilt * (x + 0.5 * y) + bend * (x * x + y * y)]
+                })
+                .collect::<Vec<[f64; 3]>>()
         };
-        fused.insert(&patch(&mut rng, [0.2, 0.1, -0.3], 4000));
-        fused.insert(&patch(&mut rng, [-0.3, 0.0, 0.35], 3000));
-        fused.insert(&patch(&mut rng, [0.2, 0.1, -0.3], 2000));
+        fused.insert(&patch(&mut rng, [0.2, 0.1, -0.3], 4000, 0.0, 0.0));
+        fused.insert(&patch(&mut rng, [-0.3, 0.0, 0.35], 3000, 0.7, 0.0));
+        fused.insert(&patch(&mut rng, [0.2, 0.1, -0.3], 2000, 0.0, 0.0));
+        fused.insert(&patch(&mut rng, [0.25, -0.3, 0.1], 3000, 0.3, 4.0));
         fused.insert(&[[0.5, -0.5, 0.5]]);
         let all: Vec<[f64; 3]> = fused.pos.clone();
         let mut scratch = BlockSearch::default();

@@ -11,14 +11,17 @@
 //!   whose nearest slot moved away is recomputed. This is exact for every target whose
 //!   distance was ≤ h (any point closer than h lies in those 27 voxels).
 //! - *far* targets (distance > h, or none yet): the minimum with the changed slots, found
-//!   block by block with box pruning. When a far target's nearest slot moved, every unchanged
+//!   block by block with box and slab pruning (a slab per changed block: far targets on the
+//!   inside of a shell skip the blocks whose box, but not whose surface patch, lies within their
+//!   distance). When a far target's nearest slot moved, every unchanged
 //!   slot is still at least its previous distance away, so the minimum over the changed slots
 //!   is the answer whenever it is no larger than that; otherwise (and for near targets whose
-//!   slot moved away) a full nearest search runs, bounded by the moved slot's new distance.
+//!   slot moved away) a full nearest search runs, batched by target block as below.
 //!
 //! Targets with no nearest slot yet are searched target block by target block
-//! ([`nearest_in_block`]: the block's first answer bounds the others, and the fused blocks that
-//! could beat those bounds are gathered once for the whole block).
+//! ([`nearest_in_block`]: the block's first answer bounds the others, the fused blocks that
+//! could beat those bounds are gathered once for the whole block, and a block is scanned only
+//! if both its box and its slab could beat a target's best).
 //!
 //! When at least half of the fused slots changed since the previous update (the first update
 //! of an episode, a checkpoint after many views) the update *pulls* instead: every target's
@@ -290,7 +293,8 @@ impl Targets {
             }
         }
         if !far.is_empty() && !changed.is_empty() {
-            let groups = ChangedBlocks::new(fused, changed);
+            let mut groups = ChangedBlocks::new(fused, changed);
+            groups.make_slabs(self.ix.domain.h);
             // Far targets are sorted by block: one group per target block.
             let spans = self.block_spans(&far);
             let this = &*self;
@@ -310,14 +314,29 @@ impl Targets {
                 }
             }
         }
-        let todo: Vec<u32> =
+        // Targets whose nearest slot moved and that no changed slot settled: a full search,
+        // batched by target block as for fresh targets.
+        let mut todo: Vec<u32> =
             recompute.iter().copied().filter(|&i| self.mark[i as usize] == self.epoch).collect();
+        todo.sort_unstable();
+        let spans = self.block_spans(&todo);
         let this = &*self;
-        let found: Vec<(f64, u32)> =
-            todo.par_iter().with_min_len(64).map(|&i| this.search_moved(fused, i as usize)).collect();
-        for (&i, &(d, s)) in todo.iter().zip(&found) {
-            self.d2[i as usize] = d;
-            self.nn[i as usize] = s;
+        let found: Vec<Vec<(f64, u32)>> = spans
+            .par_iter()
+            .map_init(
+                || (BlockSearch::default(), Vec::new()),
+                |(scratch, pts), &(s, e)| {
+                    pts.clear();
+                    pts.extend(todo[s..e].iter().map(|&i| this.ix.pts[i as usize]));
+                    let mut out = Vec::with_capacity(e - s);
+                    nearest_in_block(fused, pts, this.cap2, scratch, &mut out);
+                    out
+                },
+            )
+            .collect();
+        for (&i, &(d, s)) in todo.iter().zip(found.iter().flatten()) {
+            (self.d2[i as usize], self.nn[i as usize]) =
+                if s == NONE { (f64::INFINITY, NONE) } else { (d, s) };
         }
         // The next far list: previous far targets and recomputed ones still farther than h.
         let mut next: Vec<u32> =
@@ -475,11 +494,10 @@ impl Targets {
                     if lb >= best.0 {
                         break;
                     }
-                    let g = &groups.blocks[gi];
-                    if g.aabb.dist2(p) >= best.0 {
+                    if !groups.may_beat(gi, p, best.0) {
                         continue;
                     }
-                    let (d, j) = groups.nearest_in_group(g, p);
+                    let (d, j) = groups.nearest_in_group(&groups.blocks[gi], p);
                     if d < best.0 {
                         best = (d, groups.slots[j]);
                     }
@@ -497,20 +515,6 @@ impl Targets {
             }
         }
         out
-    }
-
-    /// A full nearest search for target `i`, whose nearest slot moved away: `(d², slot)`, or
-    /// `(∞, NONE)` when nothing is within the cap. The moved slot's new position bounds the
-    /// answer from above, which keeps the search local.
-    fn search_moved(&self, fused: &FusedCloud, i: usize) -> (f64, u32) {
-        let (ub, ub_slot) = self.moved_bound(fused, i);
-        let (d, s) = fused.nearest(self.ix.pts[i], ub);
-        let (d, s) = if s == NONE { (ub, ub_slot) } else { (d, s) };
-        if s == NONE {
-            (f64::INFINITY, NONE)
-        } else {
-            (d, s)
-        }
     }
 
     /// The runs of `idx` (target indices in increasing order) that share a target block:

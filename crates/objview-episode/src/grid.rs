@@ -348,6 +348,7 @@ pub(crate) fn box_box_dist2(a: &Aabb, b: &Aabb) -> f64 {
 pub struct BlockSearch {
     cand: Vec<(f64, [i32; 3], Aabb)>,
     slabs: Vec<Option<Slab>>,
+    buf: Vec<[f64; 3]>,
 }
 
 /// A slab around the points of one block: every point q has |n·(q − c)| ≤ t (n a unit vector),
@@ -366,50 +367,53 @@ impl Slab {
     /// The slab that bounds nothing (`lb2` is always 0).
     const NONE: Slab = Slab { n: [1.0, 0.0, 0.0], c: [0.0; 3], t: f64::INFINITY };
 
-    /// The slab of the points of block `b` (four passes over them): the plane through their
-    /// centroid, the point farthest from it and the point farthest from that line, and the
-    /// largest distance of a point from that plane; None when fewer than 3 points or no plane.
-    fn of_block<S: Bucketed>(set: &S, b: [i32; 3]) -> Option<Slab> {
+    /// The slab of `pts`: the plane through their centroid, the point farthest from it and the
+    /// point farthest from that line, and the largest distance of a point from that plane;
+    /// None when fewer than 3 points or no plane.
+    fn of_points(pts: &[[f64; 3]]) -> Option<Slab> {
+        if pts.len() < 3 {
+            return None;
+        }
         let mut sum = [0.0; 3];
-        let mut k = 0usize;
-        set.for_block(b, |_, q| {
+        for q in pts {
             for a in 0..3 {
                 sum[a] += q[a];
             }
-            k += 1;
-        });
-        if k < 3 {
-            return None;
         }
-        let c = sum.map(|x| x / k as f64);
-        // The plane through c, the point farthest from c and the point farthest from that line.
+        let c = sum.map(|x| x / pts.len() as f64);
         let mut far = ([0.0; 3], 0.0);
-        set.for_block(b, |_, q| {
+        for &q in pts {
             let d = dist2(q, c);
             if d > far.1 {
                 far = ([q[0] - c[0], q[1] - c[1], q[2] - c[2]], d);
             }
-        });
+        }
         let u = far.0;
         let mut best = ([0.0; 3], 0.0);
-        set.for_block(b, |_, q| {
+        for &q in pts {
             let v = [q[0] - c[0], q[1] - c[1], q[2] - c[2]];
             let w = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
             let m = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
             if m > best.1 {
                 best = (w, m);
             }
-        });
+        }
         if best.1 <= 0.0 || !best.1.is_finite() {
             return None;
         }
         let norm = best.1.sqrt();
         let n = best.0.map(|x| x / norm);
-        let mut t: f64 = 0.0;
-        set.for_block(b, |_, q| {
-            t = t.max((n[0] * (q[0] - c[0]) + n[1] * (q[1] - c[1]) + n[2] * (q[2] - c[2])).abs());
+        let t = pts.iter().fold(0.0f64, |t, q| {
+            t.max((n[0] * (q[0] - c[0]) + n[1] * (q[1] - c[1]) + n[2] * (q[2] - c[2])).abs())
         });
         Some(Slab { n, c, t })
+    }
+
+    /// The slab of the points in a box, or [`Slab::NONE`] where the box is thin along an axis
+    /// (a patch of an axis-aligned face: the box already bounds as well as a slab could).
+    fn of_box(aabb: &Aabb, h: f64, pts: &[[f64; 3]]) -> Slab {
+        let thin = (0..3).any(|a| aabb.hi[a] - aabb.lo[a] < 0.25 * h);
+        (!thin).then(|| Slab::of_points(pts)).flatten().unwrap_or(Slab::NONE)
     }
 
     /// A lower bound of d² from `p` to every point of the slab's block. Rounding: the dot
@@ -512,11 +516,11 @@ pub fn nearest_in_block<S: Bucketed>(
             if aabb.dist2(p) >= best.0 {
                 continue;
             }
-            // The block's slab, made when a point first scans it. A box that is thin along an
-            // axis (a patch of an axis-aligned face) already bounds as well as a slab could.
+            // The block's slab, made when a point first scans it.
             let slab = scratch.slabs[c].get_or_insert_with(|| {
-                let thin = (0..3).any(|a| aabb.hi[a] - aabb.lo[a] < 0.25 * domain.h);
-                (!thin).then(|| Slab::of_block(set, *b)).flatten().unwrap_or(Slab::NONE)
+                scratch.buf.clear();
+                set.for_block(*b, |_, q| scratch.buf.push(q));
+                Slab::of_box(aabb, domain.h, &scratch.buf)
             });
             if slab.lb2(p) >= best.0 {
                 continue;
@@ -632,6 +636,9 @@ pub struct ChangedBlocks {
     pub(crate) xyz: [Vec<f64>; 3],
     /// Domain block index → index into `blocks`, or NONE.
     pub(crate) lookup: Vec<u32>,
+    /// Per group, its slab once [`ChangedBlocks::make_slabs`] ran (empty otherwise: the
+    /// per-step coverage update does not use them).
+    slabs: Vec<Slab>,
 }
 
 pub(crate) struct ChangedBlock {
@@ -694,6 +701,30 @@ impl ChangedBlocks {
         self.blocks.clear();
         self.slots.clear();
         self.xyz.iter_mut().for_each(Vec::clear);
+        self.slabs.clear();
+    }
+
+    /// Computes every group's slab (see [`nearest_in_block`]), for searches from points far
+    /// off the surface.
+    pub(crate) fn make_slabs(&mut self, h: f64) {
+        let mut buf = Vec::new();
+        self.slabs.clear();
+        for g in &self.blocks {
+            buf.clear();
+            buf.extend(
+                (g.range.0..g.range.1)
+                    .filter(|&i| self.slots[i] != NONE)
+                    .map(|i| [self.xyz[0][i], self.xyz[1][i], self.xyz[2][i]]),
+            );
+            self.slabs.push(Slab::of_box(&g.aabb, h, &buf));
+        }
+    }
+
+    /// Whether group `gi` may hold a point closer to `p` than d² `best` by its box and (when
+    /// made) its slab.
+    #[inline]
+    pub(crate) fn may_beat(&self, gi: usize, p: [f64; 3], best: f64) -> bool {
+        self.blocks[gi].aabb.dist2(p) < best && self.slabs.get(gi).is_none_or(|s| s.lb2(p) < best)
     }
 
     /// Points the lookup at the groups.
@@ -876,10 +907,8 @@ mod tests {
                     inside([x, y, z])
                 })
                 .collect();
-            let mut set = FusedCloud::new(domain.clone());
-            set.insert(&pts);
-            let slab = Slab::of_block(&set, bk);
-            let all: Vec<[f64; 3]> = set.pos.clone();
+            let slab = Slab::of_points(&pts);
+            let all = pts;
             if trial % 5 == 3 || all.len() < 3 {
                 assert!(slab.is_none(), "trial {trial}: {} points span no plane", all.len());
                 continue;

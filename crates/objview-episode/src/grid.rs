@@ -908,9 +908,8 @@ mod tests {
                 })
                 .collect();
             let slab = Slab::of_points(&pts);
-            let all = pts;
-            if trial % 5 == 3 || all.len() < 3 {
-                assert!(slab.is_none(), "trial {trial}: {} points span no plane", all.len());
+            if trial % 5 == 3 || pts.len() < 3 {
+                assert!(slab.is_none(), "trial {trial}: {} points span no plane", pts.len());
                 continue;
             }
             // Points on a line may still give a slab (rounding leaves a tiny cross product):
@@ -918,7 +917,7 @@ mod tests {
             let Some(slab) = slab else { continue };
             for _ in 0..50 {
                 let p: [f64; 3] = [0; 3].map(|_: i32| rng.gen_range(-0.7..0.7));
-                let want = all.iter().map(|&q| dist2(p, q)).fold(f64::INFINITY, f64::min);
+                let want = pts.iter().map(|&q| dist2(p, q)).fold(f64::INFINITY, f64::min);
                 assert!(slab.lb2(p) <= want, "trial {trial}: {} > {want}", slab.lb2(p));
                 if trial % 5 == 0 && slab.lb2(p) > 0.5 * want {
                     tight += 1;

@@ -270,22 +270,8 @@ impl Targets {
             // One batched search per target block (`fresh` is in voxel order, so a block's
             // targets are consecutive): the block's first answer bounds the others, and the
             // fused blocks that could beat those bounds are gathered once for all of them.
-            let spans = self.block_spans(&fresh);
-            let this = &*self;
-            let found: Vec<Vec<(f64, u32)>> = spans
-                .par_iter()
-                .map_init(
-                    || (BlockSearch::default(), Vec::new()),
-                    |(scratch, pts), &(s, e)| {
-                        pts.clear();
-                        pts.extend(fresh[s..e].iter().map(|&i| this.ix.pts[i as usize]));
-                        let mut out = Vec::with_capacity(e - s);
-                        nearest_in_block(fused, pts, this.cap2, scratch, &mut out);
-                        out
-                    },
-                )
-                .collect();
-            for (&i, &(d, s)) in fresh.iter().zip(found.iter().flatten()) {
+            let found = self.nearest_by_block(fused, &fresh);
+            for (&i, &(d, s)) in fresh.iter().zip(&found) {
                 if s != NONE {
                     self.d2[i as usize] = d;
                     self.nn[i as usize] = s;
@@ -319,22 +305,8 @@ impl Targets {
         let mut todo: Vec<u32> =
             recompute.iter().copied().filter(|&i| self.mark[i as usize] == self.epoch).collect();
         todo.sort_unstable();
-        let spans = self.block_spans(&todo);
-        let this = &*self;
-        let found: Vec<Vec<(f64, u32)>> = spans
-            .par_iter()
-            .map_init(
-                || (BlockSearch::default(), Vec::new()),
-                |(scratch, pts), &(s, e)| {
-                    pts.clear();
-                    pts.extend(todo[s..e].iter().map(|&i| this.ix.pts[i as usize]));
-                    let mut out = Vec::with_capacity(e - s);
-                    nearest_in_block(fused, pts, this.cap2, scratch, &mut out);
-                    out
-                },
-            )
-            .collect();
-        for (&i, &(d, s)) in todo.iter().zip(found.iter().flatten()) {
+        let found = self.nearest_by_block(fused, &todo);
+        for (&i, &(d, s)) in todo.iter().zip(&found) {
             (self.d2[i as usize], self.nn[i as usize]) =
                 if s == NONE { (f64::INFINITY, NONE) } else { (d, s) };
         }
@@ -515,6 +487,27 @@ impl Targets {
             }
         }
         out
+    }
+
+    /// The nearest slot below the cap of each target of `idx` (increasing): `(d², slot)` or
+    /// `(cap², NONE)`, by one [`nearest_in_block`] per target block (a block's targets are
+    /// consecutive), in parallel on the current rayon pool.
+    fn nearest_by_block(&self, fused: &FusedCloud, idx: &[u32]) -> Vec<(f64, u32)> {
+        let found: Vec<Vec<(f64, u32)>> = self
+            .block_spans(idx)
+            .par_iter()
+            .map_init(
+                || (BlockSearch::default(), Vec::new()),
+                |(scratch, pts), &(s, e)| {
+                    pts.clear();
+                    pts.extend(idx[s..e].iter().map(|&i| self.ix.pts[i as usize]));
+                    let mut out = Vec::with_capacity(e - s);
+                    nearest_in_block(fused, pts, self.cap2, scratch, &mut out);
+                    out
+                },
+            )
+            .collect();
+        found.into_iter().flatten().collect()
     }
 
     /// The runs of `idx` (target indices in increasing order) that share a target block:

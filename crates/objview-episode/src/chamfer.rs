@@ -12,11 +12,11 @@
 //!   distance was ≤ h (any point closer than h lies in those 27 voxels).
 //! - *far* targets (distance > h, or none yet): the minimum with the changed slots, found
 //!   block by block with box and slab pruning (a slab per changed block: far targets on the
-//!   inside of a shell skip the blocks whose box, but not whose surface patch, lies within their
-//!   distance). When a far target's nearest slot moved, every unchanged
-//!   slot is still at least its previous distance away, so the minimum over the changed slots
-//!   is the answer whenever it is no larger than that; otherwise (and for near targets whose
-//!   slot moved away) a full nearest search runs, batched by target block as below.
+//!   inside of a shell skip the blocks whose box, but not whose surface patch, lies within
+//!   their distance). When a far target's nearest slot moved, every unchanged slot is still at
+//!   least its previous distance away, so the minimum over the changed slots is the answer
+//!   whenever it is no larger than that; otherwise (and for near targets whose slot moved
+//!   away) a full nearest search runs, batched by target block as below.
 //!
 //! Targets with no nearest slot yet are searched target block by target block
 //! ([`nearest_in_block`]: the block's first answer bounds the others, the fused blocks that

@@ -409,11 +409,16 @@ impl Slab {
         Some(Slab { n, c, t })
     }
 
-    /// The slab of the points in a box, or [`Slab::NONE`] where the box is thin along an axis
-    /// (a patch of an axis-aligned face: the box already bounds as well as a slab could).
-    fn of_box(aabb: &Aabb, h: f64, pts: &[[f64; 3]]) -> Slab {
-        let thin = (0..3).any(|a| aabb.hi[a] - aabb.lo[a] < 0.25 * h);
-        (!thin).then(|| Slab::of_points(pts)).flatten().unwrap_or(Slab::NONE)
+    /// The slab of the points in box `aabb`, which `fill` writes into `buf` (cleared first),
+    /// or [`Slab::NONE`] where the box is thin along an axis (a patch of an axis-aligned face:
+    /// the box already bounds as well as a slab could; the points are then not copied).
+    fn of_box(aabb: &Aabb, h: f64, buf: &mut Vec<[f64; 3]>, fill: impl FnOnce(&mut Vec<[f64; 3]>)) -> Slab {
+        if (0..3).any(|a| aabb.hi[a] - aabb.lo[a] < 0.25 * h) {
+            return Slab::NONE;
+        }
+        buf.clear();
+        fill(buf);
+        Slab::of_points(buf).unwrap_or(Slab::NONE)
     }
 
     /// A lower bound of d² from `p` to every point of the slab's block. Rounding: the dot
@@ -518,9 +523,7 @@ pub fn nearest_in_block<S: Bucketed>(
             }
             // The block's slab, made when a point first scans it.
             let slab = scratch.slabs[c].get_or_insert_with(|| {
-                scratch.buf.clear();
-                set.for_block(*b, |_, q| scratch.buf.push(q));
-                Slab::of_box(aabb, domain.h, &scratch.buf)
+                Slab::of_box(aabb, domain.h, &mut scratch.buf, |buf| set.for_block(*b, |_, q| buf.push(q)))
             });
             if slab.lb2(p) >= best.0 {
                 continue;
@@ -636,9 +639,6 @@ pub struct ChangedBlocks {
     pub(crate) xyz: [Vec<f64>; 3],
     /// Domain block index → index into `blocks`, or NONE.
     pub(crate) lookup: Vec<u32>,
-    /// Per group, its slab once [`ChangedBlocks::make_slabs`] ran (empty otherwise: the
-    /// per-step coverage update does not use them).
-    slabs: Vec<Slab>,
 }
 
 pub(crate) struct ChangedBlock {
@@ -646,6 +646,9 @@ pub(crate) struct ChangedBlock {
     pub(crate) range: (usize, usize),
     /// The box of its changed slots' positions (a tighter bound than the block's cube).
     pub(crate) aabb: Aabb,
+    /// Their slab once [`ChangedBlocks::make_slabs`] ran ([`Slab::NONE`] before: the per-step
+    /// coverage update does not use slabs).
+    slab: Slab,
 }
 
 impl ChangedBlocks {
@@ -683,7 +686,7 @@ impl ChangedBlocks {
                 c.push(f64::INFINITY);
             }
         }
-        self.blocks.push(ChangedBlock { key, range: (start, self.slots.len()), aabb });
+        self.blocks.push(ChangedBlock { key, range: (start, self.slots.len()), aabb, slab: Slab::NONE });
     }
 
     /// Clears the groups (and their lookup entries).
@@ -701,30 +704,27 @@ impl ChangedBlocks {
         self.blocks.clear();
         self.slots.clear();
         self.xyz.iter_mut().for_each(Vec::clear);
-        self.slabs.clear();
     }
 
     /// Computes every group's slab (see [`nearest_in_block`]), for searches from points far
     /// off the surface.
     pub(crate) fn make_slabs(&mut self, h: f64) {
         let mut buf = Vec::new();
-        self.slabs.clear();
-        for g in &self.blocks {
-            buf.clear();
-            buf.extend(
-                (g.range.0..g.range.1)
-                    .filter(|&i| self.slots[i] != NONE)
-                    .map(|i| [self.xyz[0][i], self.xyz[1][i], self.xyz[2][i]]),
-            );
-            self.slabs.push(Slab::of_box(&g.aabb, h, &buf));
+        let (slots, xyz) = (&self.slots, &self.xyz);
+        for g in &mut self.blocks {
+            let (lo, hi) = g.range;
+            g.slab = Slab::of_box(&g.aabb, h, &mut buf, |buf| {
+                buf.extend((lo..hi).filter(|&i| slots[i] != NONE).map(|i| [xyz[0][i], xyz[1][i], xyz[2][i]]))
+            });
         }
     }
 
-    /// Whether group `gi` may hold a point closer to `p` than d² `best` by its box and (when
-    /// made) its slab.
+    /// Whether group `gi` may hold a point closer to `p` than d² `best` by its box and its slab
+    /// (which bounds nothing unless [`ChangedBlocks::make_slabs`] ran).
     #[inline]
     pub(crate) fn may_beat(&self, gi: usize, p: [f64; 3], best: f64) -> bool {
-        self.blocks[gi].aabb.dist2(p) < best && self.slabs.get(gi).is_none_or(|s| s.lb2(p) < best)
+        let g = &self.blocks[gi];
+        g.aabb.dist2(p) < best && g.slab.lb2(p) < best
     }
 
     /// Points the lookup at the groups.

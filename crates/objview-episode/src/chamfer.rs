@@ -35,7 +35,7 @@
 
 use crate::fusion::FusedCloud;
 use crate::grid::{
-    block_of, dist2, keyed_points, local_index, nearest_in, nearest_in_block, runs_around, BlockSearch,
+    block_of, dist2, keyed_points, local_index, nearest_in, nearest_in_block, runs_in_box, Aabb, BlockSearch,
     Bucketed, ChangedBlocks, Domain, SuperGrid, BLOCK_CELLS, NONE,
 };
 use rayon::prelude::*;
@@ -70,8 +70,14 @@ impl TargetIndex {
     /// voxels within `r` (per axis) of voxel `k`: runs of consecutive voxels along x within one
     /// block, which are contiguous in the sorted points.
     #[inline]
-    fn for_runs_around(&self, k: [i32; 3], r: i32, mut f: impl FnMut(u32, u32, u32)) {
-        runs_around(&self.domain, k, r, |b, first, len| {
+    fn for_runs_around(&self, k: [i32; 3], r: i32, f: impl FnMut(u32, u32, u32)) {
+        self.for_runs_in_box(k.map(|x| x - r), k.map(|x| x + r), f)
+    }
+
+    /// [`TargetIndex::for_runs_around`] for the voxels of the box `lo..=hi` (voxel keys).
+    #[inline]
+    fn for_runs_in_box(&self, lo: [i32; 3], hi: [i32; 3], mut f: impl FnMut(u32, u32, u32)) {
+        runs_in_box(&self.domain, lo, hi, |b, first, len| {
             let t = self.table[b];
             if t == NONE {
                 return;
@@ -700,29 +706,44 @@ impl Targets {
     /// target strictly closer than `tau` to one of `points` — the coverage of one fused view
     /// without distance bookkeeping (the oracle's per-candidate gains).
     ///
-    /// The points are grouped by their fine voxel; each group visits the fine voxels within
-    /// ⌈τ/h⌉ of its own once, as runs along x that are contiguous in the sorted targets, and
-    /// tests each target not yet marked against the group's points until one is close enough.
-    /// A target is marked iff some point of some group is within τ: the same bits as testing
-    /// every point against its own neighbourhood, with one walk per voxel instead of one per
-    /// point and no test of a target already marked.
+    /// The points are grouped by cubes of 4×4×4 fine voxels; each group visits the fine voxels
+    /// within ⌈τ/h⌉ of its cube once, as runs along x that are contiguous in the sorted
+    /// targets, and tests each target not yet marked, first against the box of the group's
+    /// points grown by τ (a target outside it is farther than τ from all of them), then against
+    /// the points until one is close enough. A target is marked iff some point of some group
+    /// is within τ: the same bits as testing every point against its own neighbourhood, with
+    /// one walk per group instead of one per point and no test of a target already marked.
     pub fn mark_within(&self, points: &[[f64; 3]], tau: f64, bits: &mut [u64]) {
         let t2 = tau * tau;
         let r = (tau / self.ix.domain.h).ceil() as i32;
+        // The box test's margin: a target outside the box grown by `m` differs from every
+        // point by more than τ along some axis even after the rounding of `lo − m` (the
+        // margin's 1e-9·τ + 1e-12 exceeds an ulp of any coordinate of a normalized scene),
+        // so its computed d² (a sum of non-negative rounded squares, at least that axis's)
+        // exceeds τ².
+        let m = tau * (1.0 + 1e-9) + 1e-12;
+        let group_of = |k: [i32; 3]| k.map(|x| x >> MARK_GROUP_SHIFT);
         let mut keyed: Vec<([i32; 3], u32)> =
-            points.iter().enumerate().map(|(j, &q)| (self.ix.domain.key(q), j as u32)).collect();
+            points.iter().enumerate().map(|(j, &q)| (group_of(self.ix.domain.key(q)), j as u32)).collect();
         keyed.sort_unstable();
         let mut group: Vec<[f64; 3]> = Vec::new();
         for run in keyed.chunk_by(|a, b| a.0 == b.0) {
             group.clear();
             group.extend(run.iter().map(|&(_, j)| points[j as usize]));
-            self.ix.for_runs_around(run[0].0, r, |_, lo, hi| {
-                for i in lo..hi {
-                    let (w, b) = (i as usize / 64, 1u64 << (i % 64));
-                    if bits[w] & b == 0 {
+            let mut bx = Aabb::EMPTY;
+            group.iter().for_each(|&q| bx.grow(q));
+            let (lo, hi) = (bx.lo.map(|x| x - m), bx.hi.map(|x| x + m));
+            let g = run[0].0;
+            let first = g.map(|x| (x << MARK_GROUP_SHIFT) - r);
+            let last = g.map(|x| (x << MARK_GROUP_SHIFT) + (1 << MARK_GROUP_SHIFT) - 1 + r);
+            self.ix.for_runs_in_box(first, last, |_, a, b| {
+                for i in a..b {
+                    let (w, bit) = (i as usize / 64, 1u64 << (i % 64));
+                    if bits[w] & bit == 0 {
                         let p = self.ix.pts[i as usize];
-                        if group.iter().any(|&q| dist2(p, q) < t2) {
-                            bits[w] |= b;
+                        let inside = (0..3).all(|k| p[k] >= lo[k] && p[k] <= hi[k]);
+                        if inside && group.iter().any(|&q| dist2(p, q) < t2) {
+                            bits[w] |= bit;
                         }
                     }
                 }
@@ -730,6 +751,12 @@ impl Targets {
         }
     }
 }
+
+/// [`Targets::mark_within`] groups its points by cubes of 2^this fine voxels per edge (4: in
+/// the oracle's runs on the mug, 0.005 voxels, τ = 0.01, its time relative to fusion in the same
+/// run was 0.84–0.94 against 1.23 with 2, 1.10 with 8 and 1.46 with single voxels; perf
+/// samples).
+const MARK_GROUP_SHIFT: i32 = 2;
 
 impl Bucketed for Targets {
     fn domain(&self) -> &Domain {

@@ -396,6 +396,37 @@ impl Bucketed for FusedCloud {
     }
 }
 
+/// The fused points of one frame on its own: the centroid of each voxel of `domain` that holds
+/// some of `points` (points outside the domain are dropped), in fine-key order — the positions a
+/// fresh [`FusedCloud`] holds after inserting `points` (the same sums in input order, the same
+/// divisions, so the same bits; tested), without its blocks, tables and slot bookkeeping. For
+/// callers that need one view's fused cloud as a point set (the oracle's per-candidate
+/// coverage).
+pub fn frame_centroids(domain: &Domain, points: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    let mut keyed: Vec<([i32; 3], u32)> = points
+        .iter()
+        .enumerate()
+        .map(|(i, &p)| (domain.key(p), i as u32))
+        .filter(|(k, _)| domain.block_index(block_of(*k)).is_some())
+        .collect();
+    // The index breaks ties: each voxel's points in input order, as the cloud sums them.
+    keyed.sort_unstable();
+    keyed
+        .chunk_by(|a, b| a.0 == b.0)
+        .map(|run| {
+            let mut a = [0.0f64; 3];
+            for &(_, i) in run {
+                let p = points[i as usize];
+                a[0] += p[0];
+                a[1] += p[1];
+                a[2] += p[2];
+            }
+            let n = run.len() as f64;
+            [a[0] / n, a[1] / n, a[2] / n]
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -404,6 +435,38 @@ mod tests {
 
     fn domain() -> Domain {
         Domain::covering(0.005, [-1.0; 3], [1.0; 3], 0.05)
+    }
+
+    #[test]
+    fn frame_centroids_are_a_fresh_clouds_positions() {
+        // Many points per voxel (sums of several terms), voxels with one point, negative keys
+        // and points outside the domain (dropped by both).
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
+        let d = Domain::covering(0.005, [-0.2; 3], [0.2; 3], 0.0);
+        for n in [1usize, 7, 500, 20_000] {
+            let pts: Vec<[f64; 3]> = (0..n)
+                .map(|i| {
+                    let r = if i % 50 == 49 {
+                        0.6
+                    } else if n > 1000 {
+                        0.02
+                    } else {
+                        0.15
+                    };
+                    [0; 3].map(|_: i32| rng.gen_range(-r..r))
+                })
+                .collect();
+            let mut f = FusedCloud::new(d.clone());
+            f.insert(&pts);
+            let bits = |v: &[[f64; 3]]| {
+                let mut b: Vec<[u64; 3]> = v.iter().map(|p| p.map(f64::to_bits)).collect();
+                b.sort_unstable();
+                b
+            };
+            let got = frame_centroids(&d, &pts);
+            assert_eq!(bits(&got), bits(&f.pos), "{n} points");
+            assert!(n < 1000 || got.len() * 10 < n, "voxels with several points: {} of {n}", got.len());
+        }
     }
 
     #[test]

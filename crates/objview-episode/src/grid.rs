@@ -156,14 +156,25 @@ pub(crate) fn assert_around_matches_cells<S: Bucketed>(set: &S, seed: u64) -> us
 /// from the first, consecutive local indices), skipping runs whose block lies outside
 /// `domain`.
 #[inline]
-pub(crate) fn runs_around(domain: &Domain, k: [i32; 3], r: i32, mut f: impl FnMut(usize, [i32; 3], usize)) {
-    for dz in -r..=r {
-        for dy in -r..=r {
-            let mut x = k[0] - r;
-            while x <= k[0] + r {
+pub(crate) fn runs_around(domain: &Domain, k: [i32; 3], r: i32, f: impl FnMut(usize, [i32; 3], usize)) {
+    runs_in_box(domain, k.map(|x| x - r), k.map(|x| x + r), f)
+}
+
+/// [`runs_around`] for the fine voxels of the box `lo..=hi` (voxel keys, per axis).
+#[inline]
+pub(crate) fn runs_in_box(
+    domain: &Domain,
+    lo: [i32; 3],
+    hi: [i32; 3],
+    mut f: impl FnMut(usize, [i32; 3], usize),
+) {
+    for z in lo[2]..=hi[2] {
+        for y in lo[1]..=hi[1] {
+            let mut x = lo[0];
+            while x <= hi[0] {
                 // The last x of x's block (two's complement: also right for negative x).
-                let end = (x | (BLOCK - 1)).min(k[0] + r);
-                let kk = [x, k[1] + dy, k[2] + dz];
+                let end = (x | (BLOCK - 1)).min(hi[0]);
+                let kk = [x, y, z];
                 if let Some(b) = domain.block_index(block_of(kk)) {
                     f(b, kk, (end - x + 1) as usize);
                 }

@@ -10,7 +10,7 @@
 
 use std::time::Instant;
 
-use objview_episode::fusion::FusedCloud;
+use objview_episode::fusion::frame_centroids;
 use objview_episode::{
     scene_domain, Action, Environment, EpisodeContext, ExecutionMode, Family, Observation, Planner,
     PlannerError, StopReason,
@@ -144,9 +144,8 @@ impl Planner for Oracle {
                     let cam = Camera::new(*pose, ctx.intrinsics);
                     let mut frame = Frame::empty(cam);
                     renderer.render_into(&oracle.mesh, &cam, &mut frame);
-                    let mut fused = FusedCloud::new(domain.clone());
-                    fused.insert(&frame.observed_points());
-                    targets.mark_within(&fused.pos, tau, &mut bits);
+                    let fused = frame_centroids(&domain, &frame.observed_points());
+                    targets.mark_within(&fused, tau, &mut bits);
                 }
                 bits
             })

@@ -9,10 +9,10 @@
 //! 2. apply the optimum-preserving reductions ([`CoverInstance::reduce`]): forced, dominated and
 //!    empty views, dominated elements;
 //! 3. solve the LP relaxation of the reduced instance with HiGHS (`lp_bound`);
-//! 4. method `auto` (default): the exact combinatorial search of [`crate::search`] (≤ 128
+//! 4. method `auto` (default): the exact combinatorial search of [`crate::search`] (≤ 384
 //!    views) from ⌈LP⌉ up, for at most [`SEARCH_SHARE`] of the time limit; it usually proves the
 //!    optimum (it is much faster than branch and bound on these instances, see that module);
-//! 5. otherwise (method `ilp`, more than 128 views, or the search ran out of its time share) the
+//! 5. otherwise (method `ilp`, more than 384 views, or the search ran out of its time share) the
 //!    ILP `min Σ x_v  s.t.  Σ_{v ∋ e} x_v ≥ 1 ∀e, x_v ∈ {0,1}` with HiGHS, warm-started from the
 //!    best cover so far, with the search's proven bound kept; the incumbent starts as the better
 //!    of the greedy covers of the original and of the reduced instance;
@@ -65,7 +65,7 @@ static HIGHS_LOCK: Mutex<()> = Mutex::new(());
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum CoverMethod {
-    /// Combinatorial search first (≤ 128 views), the HiGHS ILP if the search runs out of time.
+    /// Combinatorial search first (≤ 384 views), the HiGHS ILP if the search runs out of time.
     #[default]
     Auto,
     /// The HiGHS ILP only.

@@ -1,5 +1,7 @@
-//! Exact minimum set cover by combinatorial search, for instances of at most 128 views — the
-//! planning protocol's size (tammes-128).
+//! Exact minimum set cover by combinatorial search, for instances of at most 384 views — the
+//! planning protocol's size (tammes-128) in one 128-bit word per view set, and the hybrid
+//! planners' selections over tammes-360 (`completion-scp`, `completion-mcp`'s full-cover test) in
+//! three ([`Mask`]: the same steps on either width).
 //!
 //! Why: the set-cover ILPs of real objects have weak LP relaxations (LP 8.9 for an optimum of 11
 //! on a gear), and HiGHS spends most of its time proving the bound (35 s on that gear; 40 s even
@@ -10,7 +12,7 @@
 //! on most.
 //!
 //! Method (iterative deepening on the cover size k):
-//! - each element (row) is the 128-bit mask of the views covering it; rows are sorted by their
+//! - each element (row) is the bit mask of the views covering it; rows are sorted by their
 //!   number of views so that the packing bound below sees the most constrained rows first;
 //! - a node is (chosen views, allowed views, rows still uncovered). It fails when some row has no
 //!   allowed view, or when a *packing bound* exceeds the views left: uncovered rows whose allowed
@@ -39,7 +41,7 @@ use std::time::Instant;
 use crate::setcover::CoverInstance;
 
 /// Largest number of views (columns) the search handles.
-pub const SEARCH_MAX_VIEWS: usize = 128;
+pub const SEARCH_MAX_VIEWS: usize = 128 * WIDE_WORDS;
 
 /// Fixed-point scale of the dual weights: a dual value of 1 (the most a row can carry).
 const DUAL_SCALE: u64 = 1 << 32;
@@ -81,23 +83,39 @@ pub fn search_min_cover(
     deadline: Option<Instant>,
 ) -> Option<SearchOutcome> {
     let n_views = inst.n_views();
-    if n_views > SEARCH_MAX_VIEWS {
-        return None;
+    if n_views <= 128 {
+        Some(search::<u128>(inst, lower, incumbent, priority, row_dual, deadline))
+    } else if n_views <= SEARCH_MAX_VIEWS {
+        Some(search::<Wide>(inst, lower, incumbent, priority, row_dual, deadline))
+    } else {
+        None
     }
+}
+
+/// [`search_min_cover`] with view sets as `M` (at least `inst.n_views()` bits wide).
+fn search<M: Mask>(
+    inst: &CoverInstance,
+    lower: usize,
+    incumbent: &[usize],
+    priority: &[f64],
+    row_dual: &[f64],
+    deadline: Option<Instant>,
+) -> SearchOutcome {
+    let n_views = inst.n_views();
     debug_assert!(inst.is_cover(incumbent));
     let mut incumbent: Vec<usize> = incumbent.to_vec();
     incumbent.sort_unstable();
     if inst.n_elements() == 0 {
-        return Some(SearchOutcome { cover: Vec::new(), optimal: true, lower_bound: 0, nodes: 0 });
+        return SearchOutcome { cover: Vec::new(), optimal: true, lower_bound: 0, nodes: 0 };
     }
 
     // Row masks over column positions.
     let elements = inst.element_ids();
-    let mut masks = vec![0u128; inst.n_elements()];
+    let mut masks = vec![M::ZERO; inst.n_elements()];
     for (c, &v) in inst.view_ids().iter().enumerate() {
         for e in inst.covered_by(v) {
             let row = elements.binary_search(&e).expect("covered elements are rows");
-            masks[row] |= 1u128 << c;
+            masks[row] = masks[row].or(M::bit(c));
         }
     }
     // Dual weights in fixed point, rows sorted (most constrained first) and deduplicated.
@@ -109,8 +127,8 @@ pub fn search_min_cover(
             0
         }
     };
-    let mut rows: Vec<(u128, u64)> = masks.iter().enumerate().map(|(r, &m)| (m, weight(r))).collect();
-    rows.sort_unstable_by_key(|&(m, _)| (m.count_ones(), m));
+    let mut rows: Vec<(M, u64)> = masks.iter().enumerate().map(|(r, &m)| (m, weight(r))).collect();
+    rows.sort_unstable_by_key(|&(m, _)| (m.count(), m));
     rows.dedup_by(|b, a| {
         // Duplicates are covered together: one row carrying both weights.
         let same = a.0 == b.0;
@@ -119,17 +137,17 @@ pub fn search_min_cover(
         }
         same
     });
-    let root: Vec<Row> = rows.into_iter().map(|(mask, weight)| Row { mask, weight }).collect();
+    let root: Vec<Row<M>> = rows.into_iter().map(|(mask, weight)| Row { mask, weight }).collect();
     // Each view's load (the weight of its rows); dividing by the largest (or by the scale, if
     // larger) makes the weights a feasible dual whatever the LP's rounding.
     let mut load = vec![0u64; n_views];
     for r in &root {
-        for c in ones(r.mask) {
+        for c in r.mask.ones() {
             load[c] += r.weight;
         }
     }
     let denom = load.iter().copied().max().unwrap_or(0).max(DUAL_SCALE);
-    let all: u128 = if n_views == 128 { u128::MAX } else { (1u128 << n_views) - 1 };
+    let all = M::first_n(n_views);
 
     // Priority ranks: 0 = highest priority value (ties by column).
     let mut rank = vec![0u32; n_views];
@@ -148,46 +166,36 @@ pub fn search_min_cover(
         nodes: 0,
         deadline,
         stopped: false,
-        found: 0,
+        found: M::ZERO,
     };
     let root_weight: u64 = root.iter().map(|r| r.weight).sum();
     let root_bound = (packing(&root, all) as usize).max(root_weight.div_ceil(denom) as usize);
     let mut k = lower.max(root_bound).max(1);
     while k < incumbent.len() {
-        if s.dfs(0, &root, 0, 0, all, k as u32) {
-            let mut cover: Vec<usize> = ones(s.found).map(|c| inst.view_ids()[c]).collect();
+        if s.dfs(0, &root, M::ZERO, M::ZERO, all, k as u32) {
+            let mut cover: Vec<usize> = s.found.ones().map(|c| inst.view_ids()[c]).collect();
             cover.sort_unstable();
             debug_assert!(inst.is_cover(&cover) && cover.len() <= k);
             let size = cover.len();
-            return Some(SearchOutcome { cover, optimal: true, lower_bound: size, nodes: s.nodes });
+            return SearchOutcome { cover, optimal: true, lower_bound: size, nodes: s.nodes };
         }
         if s.stopped {
-            return Some(SearchOutcome { cover: incumbent, optimal: false, lower_bound: k, nodes: s.nodes });
+            return SearchOutcome { cover: incumbent, optimal: false, lower_bound: k, nodes: s.nodes };
         }
         k += 1;
     }
     let size = incumbent.len();
-    Some(SearchOutcome { cover: incumbent, optimal: true, lower_bound: size, nodes: s.nodes })
-}
-
-fn ones(mut m: u128) -> impl Iterator<Item = usize> {
-    std::iter::from_fn(move || {
-        (m != 0).then(|| {
-            let c = m.trailing_zeros() as usize;
-            m &= m - 1;
-            c
-        })
-    })
+    SearchOutcome { cover: incumbent, optimal: true, lower_bound: size, nodes: s.nodes }
 }
 
 /// A row as the search carries it: the views covering it and its dual weight (fixed point).
 #[derive(Debug, Clone, Copy)]
-struct Row {
-    mask: u128,
+struct Row<M> {
+    mask: M,
     weight: u64,
 }
 
-struct Search {
+struct Search<M> {
     /// Per column: its priority rank (lower first; all 0 without priorities).
     rank: Vec<u32>,
     /// The dual weights' denominator: every view's load is at most it.
@@ -195,40 +203,32 @@ struct Search {
     /// Per column: its load, the weight of all rows it covers.
     load: Vec<u64>,
     /// Uncovered rows per depth, in the root's order (buffers reused across nodes).
-    levels: Vec<Vec<Row>>,
+    levels: Vec<Vec<Row<M>>>,
     nodes: u64,
     deadline: Option<Instant>,
     stopped: bool,
     /// The cover found (column mask).
-    found: u128,
+    found: M,
 }
 
 /// Greedy packing of `rows` (in their sorted order) with pairwise disjoint allowed views.
-fn packing(rows: &[Row], allowed: u128) -> u32 {
-    let mut used = 0u128;
+fn packing<M: Mask>(rows: &[Row<M>], allowed: M) -> u32 {
+    let mut used = M::ZERO;
     let mut pack = 0;
     for r in rows {
-        let a = r.mask & allowed;
-        if a & used == 0 {
+        let a = r.mask.and(allowed);
+        if a.and(used).is_zero() {
             pack += 1;
-            used |= a;
+            used = used.or(a);
         }
     }
     pack
 }
 
-impl Search {
+impl<M: Mask> Search<M> {
     /// Whether the rows of `parent` not covered by view mask `bit` (all of them when `bit` is 0)
     /// have a cover of at most `k_left` allowed views. The node's rows go to `levels[depth]`.
-    fn dfs(
-        &mut self,
-        depth: usize,
-        parent: &[Row],
-        bit: u128,
-        chosen: u128,
-        allowed: u128,
-        k_left: u32,
-    ) -> bool {
+    fn dfs(&mut self, depth: usize, parent: &[Row<M>], bit: M, chosen: M, allowed: M, k_left: u32) -> bool {
         self.nodes += 1;
         if self.nodes % DEADLINE_CHECK_NODES == 0 && self.deadline.is_some_and(|d| Instant::now() >= d) {
             self.stopped = true;
@@ -251,36 +251,36 @@ impl Search {
     fn expand(
         &mut self,
         depth: usize,
-        parent: &[Row],
-        bit: u128,
-        rows: &mut Vec<Row>,
-        chosen: u128,
-        allowed: u128,
+        parent: &[Row<M>],
+        bit: M,
+        rows: &mut Vec<Row<M>>,
+        chosen: M,
+        allowed: M,
         k_left: u32,
     ) -> bool {
-        let mut used = 0u128;
+        let mut used = M::ZERO;
         let mut pack = 0u32;
-        let mut branch = (u32::MAX, 0u128);
-        let mut common = u128::MAX;
+        let mut branch = (u32::MAX, M::ZERO);
+        let mut common = M::FULL;
         let mut weight = 0u64;
         for &r in parent {
-            if r.mask & bit != 0 {
+            if !r.mask.and(bit).is_zero() {
                 continue;
             }
             rows.push(r);
             weight += r.weight;
-            let a = r.mask & allowed;
-            if a == 0 {
+            let a = r.mask.and(allowed);
+            if a.is_zero() {
                 return false;
             }
-            common &= a;
-            let c = a.count_ones();
+            common = common.and(a);
+            let c = a.count();
             if c < branch.0 {
                 branch = (c, a);
             }
-            if a & used == 0 {
+            if a.and(used).is_zero() {
                 pack += 1;
-                used |= a;
+                used = used.or(a);
                 if pack > k_left {
                     return false;
                 }
@@ -295,20 +295,20 @@ impl Search {
             return false;
         }
         if k_left == 1 {
-            if common == 0 {
+            if common.is_zero() {
                 return false;
             }
-            self.found = chosen | 1u128 << common.trailing_zeros();
+            self.found = chosen.or(M::bit(common.first()));
             return true;
         }
         // Candidate views of the branching row, by uncovered rows covered (descending).
         let candidates = branch.1;
-        let mut order: Vec<(u32, u32)> = ones(candidates).map(|c| (0, c as u32)).collect();
+        let mut order: Vec<(u32, u32)> = candidates.ones().map(|c| (0, c as u32)).collect();
         for r in rows.iter() {
-            let m = r.mask & candidates;
-            if m != 0 {
+            let m = r.mask.and(candidates);
+            if !m.is_zero() {
                 for o in order.iter_mut() {
-                    o.0 += (m >> o.1 & 1) as u32;
+                    o.0 += m.has(o.1 as usize) as u32;
                 }
             }
         }
@@ -318,20 +318,167 @@ impl Search {
         });
         let mut allowed = allowed;
         for &(_, v) in &order {
-            let bit = 1u128 << v;
+            let bit = M::bit(v as usize);
             // The child's rows weigh at least `weight` − v's load: no need to visit it when
             // that already exceeds what its `k_left − 1` views can hold.
             let hopeless = weight.saturating_sub(self.load[v as usize]) > (k_left - 1) as u64 * self.denom;
-            if !hopeless && self.dfs(depth + 1, rows, bit, chosen | bit, allowed, k_left - 1) {
+            if !hopeless && self.dfs(depth + 1, rows, bit, chosen.or(bit), allowed, k_left - 1) {
                 return true;
             }
             if self.stopped {
                 return false;
             }
             // Every cover with v was searched: the remaining branches exclude it.
-            allowed &= !bit;
+            allowed = allowed.and_not(bit);
         }
         false
+    }
+}
+
+/// A set of views (columns) as the search carries it: a bitset at least as wide as the
+/// instance. `u128` serves the planning protocol's 128 views; [`Wide`] the planners' larger
+/// candidate sets (tammes-360). The search runs the same steps on either, so on an instance
+/// that fits both it returns the same cover (tested).
+trait Mask: Copy + Ord + std::fmt::Debug {
+    /// No view.
+    const ZERO: Self;
+    /// Every bit (the identity of `and`).
+    const FULL: Self;
+    /// Views 0..n.
+    fn first_n(n: usize) -> Self;
+    /// View c alone.
+    fn bit(c: usize) -> Self;
+    fn and(self, o: Self) -> Self;
+    fn or(self, o: Self) -> Self;
+    /// `self` without the views of `o`.
+    fn and_not(self, o: Self) -> Self;
+    fn is_zero(self) -> bool;
+    /// Number of views.
+    fn count(self) -> u32;
+    /// The lowest view (`self` not empty).
+    fn first(self) -> usize;
+    fn has(self, c: usize) -> bool;
+    /// The views, ascending.
+    fn ones(self) -> impl Iterator<Item = usize>;
+}
+
+impl Mask for u128 {
+    const ZERO: u128 = 0;
+    const FULL: u128 = u128::MAX;
+    fn first_n(n: usize) -> u128 {
+        if n >= 128 {
+            u128::MAX
+        } else {
+            (1u128 << n) - 1
+        }
+    }
+    #[inline(always)]
+    fn bit(c: usize) -> u128 {
+        1u128 << c
+    }
+    #[inline(always)]
+    fn and(self, o: u128) -> u128 {
+        self & o
+    }
+    #[inline(always)]
+    fn or(self, o: u128) -> u128 {
+        self | o
+    }
+    #[inline(always)]
+    fn and_not(self, o: u128) -> u128 {
+        self & !o
+    }
+    #[inline(always)]
+    fn is_zero(self) -> bool {
+        self == 0
+    }
+    #[inline(always)]
+    fn count(self) -> u32 {
+        self.count_ones()
+    }
+    #[inline(always)]
+    fn first(self) -> usize {
+        self.trailing_zeros() as usize
+    }
+    #[inline(always)]
+    fn has(self, c: usize) -> bool {
+        self >> c & 1 == 1
+    }
+    fn ones(self) -> impl Iterator<Item = usize> {
+        let mut m = self;
+        std::iter::from_fn(move || {
+            (m != 0).then(|| {
+                let c = m.trailing_zeros() as usize;
+                m &= m - 1;
+                c
+            })
+        })
+    }
+}
+
+/// Words of [`Wide`].
+const WIDE_WORDS: usize = 3;
+
+/// A view set of up to 384 views: three `u128` words, view c in word c / 128. Ordered by its
+/// words from the highest, as the number it spells (the order the search sorts rows in).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Wide([u128; WIDE_WORDS]);
+
+impl PartialOrd for Wide {
+    fn partial_cmp(&self, o: &Wide) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(o))
+    }
+}
+
+impl Ord for Wide {
+    fn cmp(&self, o: &Wide) -> std::cmp::Ordering {
+        self.0.iter().rev().cmp(o.0.iter().rev())
+    }
+}
+
+impl Mask for Wide {
+    const ZERO: Wide = Wide([0; WIDE_WORDS]);
+    const FULL: Wide = Wide([u128::MAX; WIDE_WORDS]);
+    fn first_n(n: usize) -> Wide {
+        Wide(std::array::from_fn(|w| u128::first_n(n.saturating_sub(w * 128))))
+    }
+    #[inline(always)]
+    fn bit(c: usize) -> Wide {
+        let mut m = Wide::ZERO;
+        m.0[c / 128] = 1u128 << (c % 128);
+        m
+    }
+    #[inline(always)]
+    fn and(self, o: Wide) -> Wide {
+        Wide(std::array::from_fn(|w| self.0[w] & o.0[w]))
+    }
+    #[inline(always)]
+    fn or(self, o: Wide) -> Wide {
+        Wide(std::array::from_fn(|w| self.0[w] | o.0[w]))
+    }
+    #[inline(always)]
+    fn and_not(self, o: Wide) -> Wide {
+        Wide(std::array::from_fn(|w| self.0[w] & !o.0[w]))
+    }
+    #[inline(always)]
+    fn is_zero(self) -> bool {
+        self.0.iter().all(|&w| w == 0)
+    }
+    #[inline(always)]
+    fn count(self) -> u32 {
+        self.0.iter().map(|w| w.count_ones()).sum()
+    }
+    #[inline(always)]
+    fn first(self) -> usize {
+        let w = self.0.iter().position(|&w| w != 0).unwrap_or(WIDE_WORDS - 1);
+        w * 128 + self.0[w].trailing_zeros() as usize
+    }
+    #[inline(always)]
+    fn has(self, c: usize) -> bool {
+        self.0[c / 128] >> (c % 128) & 1 == 1
+    }
+    fn ones(self) -> impl Iterator<Item = usize> {
+        (0..WIDE_WORDS).flat_map(move |w| self.0[w].ones().map(move |c| w * 128 + c))
     }
 }
 
@@ -357,6 +504,78 @@ mod tests {
         let n_el = rng.gen_range(elements);
         let p = rng.gen_range(p);
         (0..n_views).map(|_| (0..n_el).filter(|_| rng.gen_bool(p)).collect()).collect()
+    }
+
+    #[test]
+    fn wide_masks_search_as_u128_does() {
+        // On instances that fit 128 bits, the wide search runs the same steps: the same
+        // cover, bound and node count (with priorities and duals too).
+        let mut rng = ChaCha8Rng::seed_from_u64(31);
+        for case in 0..60 {
+            let views = random_views(&mut rng, 60..=128, 1..60, 0.05..0.3);
+            let inst = inst(&views);
+            let greedy = inst.greedy();
+            let priority: Vec<f64> = (0..inst.n_views()).map(|_| rng.gen_range(0.0..1.0)).collect();
+            let duals: Vec<f64> = (0..inst.n_elements()).map(|_| rng.gen_range(0.0..0.4)).collect();
+            for (pr, du) in [(&[][..], &[][..]), (&priority[..], &duals[..])] {
+                let a = search::<u128>(&inst, 0, &greedy, pr, du, None);
+                let b = search::<Wide>(&inst, 0, &greedy, pr, du, None);
+                assert_eq!(a, b, "case {case}");
+            }
+        }
+    }
+
+    #[test]
+    fn wide_rings_are_solved_exactly() {
+        // n views on a ring (element i seen by views i and i + 1 mod n): the optimum is
+        // ⌈n/2⌉, with views in every word of the wide masks.
+        for n in [129usize, 200, 255, 256, 257, 383, 384] {
+            let views: Vec<Vec<usize>> = (0..n).map(|v| vec![v, (v + n - 1) % n]).collect();
+            let inst = inst(&views);
+            let out = search_min_cover(&inst, 0, &inst.greedy(), &[], &[], None).unwrap();
+            assert!(out.optimal && inst.is_cover(&out.cover), "{n} views");
+            assert_eq!(out.cover.len(), n.div_ceil(2), "{n} views");
+        }
+    }
+
+    #[test]
+    fn more_than_128_views_match_the_ilp() {
+        use crate::ilp::{solve_min_cover, CoverMethod, CoverSettings};
+        // 129–384 views (the wide masks, every word in use): the search's optimum equals
+        // HiGHS's on the same instance, and its cover is a cover.
+        let mut rng = ChaCha8Rng::seed_from_u64(32);
+        let mut wide = 0;
+        for case in 0..12 {
+            let n_views = [129, 200, 256, 300, 383, 384][case % 6];
+            let n_el: usize = rng.gen_range(20..40);
+            let p = rng.gen_range(0.08..0.2);
+            let bitsets: Vec<Vec<u64>> = (0..n_views)
+                .map(|_| {
+                    let mut b = vec![0u64; n_el.div_ceil(64)];
+                    for e in 0..n_el {
+                        if rng.gen_bool(p) {
+                            b[e / 64] |= 1 << (e % 64);
+                        }
+                    }
+                    b
+                })
+                .collect();
+            let ilp =
+                CoverSettings { method: CoverMethod::Ilp, time_limit_s: 60.0, ..CoverSettings::default() };
+            let auto = CoverSettings { time_limit_s: 60.0, ..CoverSettings::default() };
+            let (Ok(a), Ok(b)) = (solve_min_cover(&bitsets, &ilp), solve_min_cover(&bitsets, &auto)) else {
+                continue; // an element no view covers
+            };
+            assert_eq!(a.d_plan, b.d_plan, "case {case}");
+            assert!(a.d_plan.is_some(), "case {case}: proven");
+            let inst = CoverInstance::from_bitsets(&bitsets, 1).unwrap();
+            let greedy = inst.greedy();
+            let out = search_min_cover(&inst, 0, &greedy, &[], &[], None).unwrap();
+            assert!(out.optimal && inst.is_cover(&out.cover), "case {case}");
+            assert_eq!(Some(out.cover.len()), a.d_plan, "case {case}");
+            wide += usize::from(inst.n_views() > 128);
+        }
+        assert!(wide >= 6, "instances wider than 128 views: {wide}");
     }
 
     #[test]
@@ -456,9 +675,10 @@ mod tests {
         assert!(out.nodes < 1000, "{} nodes", out.nodes);
 
         // An instance too large for the search.
-        let big: Vec<Vec<usize>> = (0..129).map(|v| vec![v]).collect();
+        let n = SEARCH_MAX_VIEWS + 1;
+        let big: Vec<Vec<usize>> = (0..n).map(|v| vec![v]).collect();
         let big = inst_of(&big);
-        assert!(search_min_cover(&big, 0, &(0..129).collect::<Vec<_>>(), &[], &[], None).is_none());
+        assert!(search_min_cover(&big, 0, &(0..n).collect::<Vec<_>>(), &[], &[], None).is_none());
 
         // A deadline in the past stops the search on its first check with a valid bound.
         let mut rng = ChaCha8Rng::seed_from_u64(3);

@@ -124,7 +124,12 @@ impl AnnotateSettings {
                 "threads": self.cover.threads,
                 "random_seed": self.cover.random_seed,
                 "method": self.cover.method.to_string(),
-                "solver": "combinatorial search (<= 128 views), then HiGHS ILP",
+                "solver": format!(
+                    "combinatorial search with dual ascent at its nodes (<= {} views, {}% of the time \
+                     limit), then HiGHS ILP",
+                    objview_difficulty::SEARCH_MAX_VIEWS,
+                    objview_difficulty::ilp::SEARCH_SHARE * 100.0
+                ),
                 "relative_gap": 0.0,
             },
         })

@@ -423,7 +423,8 @@ impl<M: Mask> Search<M> {
         let loads = &mut self.loads[base..base + self.n_views];
         let weight = ascend(rows, allowed, self.denom, loads, weight);
         ranked.clear();
-        ranked.extend(allowed.ones().map(|c| (loads[c], c as u32)));
+        // Views covering none of the rows add nothing to any sum of loads.
+        ranked.extend(allowed.ones().filter(|&c| loads[c] != 0).map(|c| (loads[c], c as u32)));
         ranked.sort_unstable_by(|a, b| b.cmp(a));
         // The most weight `k` allowed views other than `skip` (and not in `excluded`) hold.
         let top = |ranked: &[(u64, u32)], k: u32, skip: u32, excluded: M| -> u64 {

@@ -790,8 +790,8 @@ impl Bucketed for Targets {
         self.ix.pts[index as usize]
     }
     #[inline]
-    fn for_cells_around<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], mut f: F) {
-        self.ix.for_runs_around(k, 1, |_, lo, hi| {
+    fn for_cells_in_box<F: FnMut(u32, [f64; 3])>(&self, lo: [i32; 3], hi: [i32; 3], mut f: F) {
+        self.ix.for_runs_in_box(lo, hi, |_, lo, hi| {
             for i in lo..hi {
                 f(i, self.ix.pts[i as usize]);
             }

@@ -9,7 +9,7 @@
 //! only around them.
 
 use crate::grid::{
-    block_of, local_index, nearest_in, runs_around, Bucketed, Domain, SuperGrid, SuperHandle, BLOCK_CELLS,
+    block_of, local_index, nearest_in, runs_in_box, Bucketed, Domain, SuperGrid, SuperHandle, BLOCK_CELLS,
     NONE,
 };
 
@@ -378,8 +378,8 @@ impl Bucketed for FusedCloud {
         self.pos[index as usize]
     }
     #[inline]
-    fn for_cells_around<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], mut f: F) {
-        runs_around(&self.domain, k, 1, |b, first, len| {
+    fn for_cells_in_box<F: FnMut(u32, [f64; 3])>(&self, lo: [i32; 3], hi: [i32; 3], mut f: F) {
+        runs_in_box(&self.domain, lo, hi, |b, first, len| {
             let t = self.table[b];
             if t == NONE {
                 return;

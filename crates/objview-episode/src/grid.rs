@@ -116,8 +116,14 @@ pub trait Bucketed {
     fn supergrid(&self) -> &SuperGrid;
     /// Calls `f(index, position)` for every point in the 27 fine voxels within one voxel of
     /// `k` (each voxel once; the order is the store's): runs along x inside a block
-    /// (`runs_around`: one block lookup per run, an empty block skips its whole run).
-    fn for_cells_around<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], f: F);
+    /// ([`runs_in_box`]: one block lookup per run, an empty block skips its whole run).
+    fn for_cells_around<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], f: F) {
+        self.for_cells_in_box(k.map(|x| x - 1), k.map(|x| x + 1), f)
+    }
+    /// Calls `f(index, position)` for every point in the fine voxels of the box `lo..=hi`
+    /// (voxel keys, per axis; each voxel once, the store's order), by x-runs as
+    /// [`Bucketed::for_cells_around`].
+    fn for_cells_in_box<F: FnMut(u32, [f64; 3])>(&self, lo: [i32; 3], hi: [i32; 3], f: F);
     /// The position of point `index`.
     fn position(&self, index: u32) -> [f64; 3];
 }
@@ -151,16 +157,9 @@ pub(crate) fn assert_around_matches_cells<S: Bucketed>(set: &S, seed: u64) -> us
     shown
 }
 
-/// Calls `f(block index, first key, len)` for the runs of the fine voxels within `r` (per
-/// axis) of voxel `k`: per (z, y) row, the x-runs that stay inside one block (`len` voxels
-/// from the first, consecutive local indices), skipping runs whose block lies outside
-/// `domain`.
-#[inline]
-pub(crate) fn runs_around(domain: &Domain, k: [i32; 3], r: i32, f: impl FnMut(usize, [i32; 3], usize)) {
-    runs_in_box(domain, k.map(|x| x - r), k.map(|x| x + r), f)
-}
-
-/// [`runs_around`] for the fine voxels of the box `lo..=hi` (voxel keys, per axis).
+/// Calls `f(block index, first key, len)` for the fine voxels of the box `lo..=hi` (voxel
+/// keys, per axis): per (z, y) row, the x-runs that stay inside one block (`len` voxels from
+/// the first, consecutive local indices), skipping runs whose block lies outside `domain`.
 #[inline]
 pub(crate) fn runs_in_box(
     domain: &Domain,
@@ -290,6 +289,66 @@ impl SuperGrid {
     }
 }
 
+/// Margin (object units) taken off the gap between a point and a neighbouring voxel's face in
+/// [`scan_around`]: a point filed in voxel k (floor(q / h) = k, a rounded division) may lie an
+/// ulp or so outside the voxel's exact box [k·h, (k + 1)·h], and k·h itself is rounded; 1e-9
+/// is millions of ulps at the metric domains' scale (coordinates of order 1) and far below h.
+const FACE_MARGIN: f64 = 1e-9;
+
+/// Lowers `best` (`(d², index)`, ties → the smaller index; a `NONE` index is a bound, not a
+/// point) to the nearest point of `set` to `p` among the 27 fine voxels around `k` (p's own
+/// voxel): the same answer as showing every point of those voxels to the comparison, without
+/// looking at the voxels that cannot hold anything closer. p's voxel is scanned first; then,
+/// row by row (y, z neighbours), a neighbouring voxel only if the gap from `p` to its faces
+/// (less [`FACE_MARGIN`], so never more than the true distance of any of its points) is at
+/// most the best so far. A skipped voxel's points all lie strictly farther than the best at
+/// that moment, which only decreases, so they could neither win nor tie.
+#[inline]
+pub(crate) fn scan_around<S: Bucketed>(set: &S, p: [f64; 3], k: [i32; 3], best: &mut (f64, u32)) {
+    let consider = |best: &mut (f64, u32), i: u32, q: [f64; 3]| {
+        let d = dist2(p, q);
+        if d < best.0 || (d == best.0 && best.1 != NONE && i < best.1) {
+            *best = (d, i);
+        }
+    };
+    let h = set.domain().h;
+    // Squared gaps to the lower and upper neighbour voxel per axis (0 when p is within the
+    // margin of that face).
+    let mut gap = [[0.0f64; 2]; 3];
+    for a in 0..3 {
+        let lo = (p[a] - k[a] as f64 * h - FACE_MARGIN).max(0.0);
+        let hi = ((k[a] + 1) as f64 * h - p[a] - FACE_MARGIN).max(0.0);
+        gap[a] = [lo * lo, hi * hi];
+    }
+    set.for_cells_in_box(k, k, |i, q| consider(best, i, q));
+    for dz in [0i32, -1, 1] {
+        let gz = if dz == 0 { 0.0 } else { gap[2][(dz > 0) as usize] };
+        if gz > best.0 {
+            continue;
+        }
+        for dy in [0i32, -1, 1] {
+            let gyz = gz + if dy == 0 { 0.0 } else { gap[1][(dy > 0) as usize] };
+            if gyz > best.0 {
+                continue;
+            }
+            let (y, z) = (k[1] + dy, k[2] + dz);
+            if dy == 0 && dz == 0 {
+                // p's own row: its voxel is done; the x neighbours one by one.
+                for dx in [-1, 1] {
+                    if gyz + gap[0][(dx > 0) as usize] <= best.0 {
+                        let x = k[0] + dx;
+                        set.for_cells_in_box([x, y, z], [x, y, z], |i, q| consider(best, i, q));
+                    }
+                }
+                continue;
+            }
+            let x0 = if gyz + gap[0][0] <= best.0 { k[0] - 1 } else { k[0] };
+            let x1 = if gyz + gap[0][1] <= best.0 { k[0] + 1 } else { k[0] };
+            set.for_cells_in_box([x0, y, z], [x1, y, z], |i, q| consider(best, i, q));
+        }
+    }
+}
+
 /// The nearest point of `set` to `p` with squared distance below `bound2` (exact; ties →
 /// the smaller index): `(d², index)`, or `(bound2, NONE)` when there is none. The 27 fine voxels
 /// around p first (anything outside them is ≥ h away), then rings of superblocks (after ring R
@@ -307,7 +366,7 @@ pub fn nearest_in<S: Bucketed>(set: &S, p: [f64; 3], bound2: f64) -> (f64, u32) 
     let h = domain.h;
     let k = domain.key(p);
     // Any order: `consider` keeps the smallest (d², index) of what it is shown.
-    set.for_cells_around(k, |i, q| consider(&mut best, i, q));
+    scan_around(set, p, k, &mut best);
     if best.0 <= h * h {
         return best;
     }
@@ -511,7 +570,7 @@ pub fn nearest_in_block<S: Bucketed>(
             }
         };
         // Anything outside the 27 voxels around p is at least h away.
-        set.for_cells_around(domain.key(p), |i, q| consider(&mut best, i, q));
+        scan_around(set, p, domain.key(p), &mut best);
         if best.0 <= h2 {
             if best.1 != NONE {
                 prev = best.1;
@@ -938,6 +997,80 @@ mod tests {
         // On a plane the slab is as thin as the plane: the bound is most of the distance for
         // many queries (a box around a tilted patch is not).
         assert!(tight > 1000, "{tight}");
+    }
+
+    /// The full 27-voxel scan that [`scan_around`] prunes.
+    fn scan_all<S: Bucketed>(set: &S, p: [f64; 3], k: [i32; 3], best: &mut (f64, u32)) {
+        set.for_cells_around(k, |i, q| {
+            let d = dist2(p, q);
+            if d < best.0 || (d == best.0 && best.1 != NONE && i < best.1) {
+                *best = (d, i);
+            }
+        });
+    }
+
+    #[test]
+    fn pruned_27_voxel_scans_equal_full_ones() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(41);
+        let h = 0.005;
+        let domain = Domain::covering(h, [-0.2; 3], [0.2; 3], 0.0);
+        // Points on a lattice of voxel faces and corners (exact ties between voxels, points a
+        // rounding away from their voxel's box), duplicated (ties of the index rule), plus a
+        // random cloud; the fused cloud holds one point per voxel, the target set several.
+        let mut pts: Vec<[f64; 3]> = Vec::new();
+        for _ in 0..4000 {
+            let lattice = |rng: &mut rand_chacha::ChaCha8Rng| rng.gen_range(-20..20) as f64 * h;
+            let q = match rng.gen_range(0..4) {
+                0 => [lattice(&mut rng), lattice(&mut rng), lattice(&mut rng)],
+                1 => [lattice(&mut rng), rng.gen_range(-0.1..0.1), lattice(&mut rng)],
+                _ => [0; 3].map(|_: i32| rng.gen_range(-0.1..0.1)),
+            };
+            pts.push(q);
+            if rng.gen_bool(0.2) {
+                pts.push(q);
+            }
+        }
+        let targets = crate::chamfer::Targets::new(domain.clone(), &pts, f64::INFINITY).unwrap();
+        let mut fused = FusedCloud::new(domain.clone());
+        fused.insert(&pts);
+        let (mut pruned_hits, mut far) = (0, 0);
+        for trial in 0..20_000 {
+            let near = |rng: &mut rand_chacha::ChaCha8Rng| {
+                let x = rng.gen_range(-20..20) as f64 * h;
+                match rng.gen_range(0..3) {
+                    0 => x,
+                    1 => x + rng.gen_range(-1e-12..1e-12),
+                    _ => x + rng.gen_range(-0.5..0.5) * h,
+                }
+            };
+            let p = if trial % 2 == 0 {
+                [near(&mut rng), near(&mut rng), near(&mut rng)]
+            } else {
+                pts[rng.gen_range(0..pts.len())].map(|x| x + rng.gen_range(-2.0..2.0) * h)
+            };
+            let k = domain.key(p);
+            // Starting bounds: none, a point's distance (as the block searches start), and
+            // values a tie away.
+            let some = pts[rng.gen_range(0..pts.len())];
+            let start = match trial % 4 {
+                0 => (f64::INFINITY, NONE),
+                1 => (dist2(p, some), NONE),
+                2 => (rng.gen_range(0.0..4.0) * h * h, NONE),
+                _ => (dist2(p, some), 0),
+            };
+            let (mut a, mut b) = (start, start);
+            scan_around(&targets, p, k, &mut a);
+            scan_all(&targets, p, k, &mut b);
+            assert_eq!(a, b, "targets, trial {trial}: {p:?}");
+            let (mut a, mut b) = (start, start);
+            scan_around(&fused, p, k, &mut a);
+            scan_all(&fused, p, k, &mut b);
+            assert_eq!(a, b, "fused, trial {trial}: {p:?}");
+            pruned_hits += (a.1 != start.1) as usize;
+            far += (a.0 > h * h) as usize;
+        }
+        assert!(pruned_hits > 5000 && far > 1000, "cases: {pruned_hits} improved, {far} far");
     }
 
     #[test]

@@ -10,8 +10,10 @@
 //!   time limit) finds a cover of at most B columns, that is the answer — the common case at
 //!   large budgets (K = 30). Otherwise the exact branch and bound of `coverage_search`
 //!   (submodular gain bound, deterministic; it proves the K = 5 plans in well under a second)
-//!   on half the time left (at most 2 s), and if it has not finished, a HiGHS ILP warm-started from its
-//!   incumbent for the rest:
+//!   on half the time left (at most 2 s), and if it has not finished, its incumbent improved by
+//!   1-swap exchanges ([`super::swap_search`]; optimal if that reaches the search's proven
+//!   bound), then a HiGHS ILP warm-started from it for the rest (whose selection, unless proven
+//!   optimal, gets the exchanges again):
 //!   `max Σ w_g y_g  s.t.  Σ x_i ≤ B,  y_g ≤ Σ_{i covers g} x_i,  x binary,  y ∈ [0, 1]`, where
 //!   elements covered by exactly the same candidates are merged into one group g of weight w_g
 //!   (an exact reduction; y needs no integrality: for binary x the optimum has y_g =
@@ -31,6 +33,7 @@ use serde::{Deserialize, Serialize};
 
 use super::coverage_search::search_max_coverage;
 use super::steps::bit;
+use super::swap_search::improve_by_swaps;
 
 /// Default wall-clock limit of the planners' ILPs (the reference's 10 s).
 pub const DEFAULT_ILP_TIME_LIMIT_S: f64 = 10.0;
@@ -47,6 +50,11 @@ pub const FULL_COVER_MAX_S: f64 = 2.0;
 pub const SEARCH_SHARE: f64 = 0.5;
 /// See [`SEARCH_SHARE`].
 pub const SEARCH_MAX_S: f64 = 2.0;
+
+/// Passes of 1-swap exchanges ([`super::swap_search`]) on a max-coverage selection that no
+/// solver proved optimal, before and after the ILP (each pass costs chosen × unchosen bitset
+/// ANDs, well under a millisecond at K = 30 over a few hundred candidates).
+pub const SWAP_PASSES: usize = 200;
 
 /// What an exact selection step returned.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -274,51 +282,68 @@ fn max_coverage_in(
     let search_s = ((time_limit_s - t.elapsed().as_secs_f64()).max(0.0) * search_share).min(SEARCH_MAX_S);
     let deadline = Instant::now() + std::time::Duration::from_secs_f64(search_s);
     let found = search_max_coverage(&compact, budget, &kept_greedy, deadline);
-    let found_chosen: Vec<usize> = found.chosen.iter().map(|&i| kept[i]).collect();
     if found.proven {
-        let covered = value(&found_chosen);
-        return optimal(found_chosen, covered, t);
+        let chosen: Vec<usize> = found.chosen.iter().map(|&i| kept[i]).collect();
+        let covered = value(&chosen);
+        return optimal(chosen, covered, t);
+    }
+    // Not proven: exchanges first (a better incumbent for the ILP's warm start); a selection
+    // reaching the search's proven bound is optimal.
+    let mut incumbent = found.chosen.clone();
+    let swapped = improve_by_swaps(&compact, budget, &mut incumbent, SWAP_PASSES);
+    if swapped >= found.bound {
+        let chosen: Vec<usize> = incumbent.iter().map(|&i| kept[i]).collect();
+        let covered = value(&chosen);
+        return optimal(chosen, covered, t);
     }
     let time_limit_s = (time_limit_s - t.elapsed().as_secs_f64()).max(0.0);
     let waited = std::cell::Cell::new(0.0);
     let solved = {
         let _lock = highs_lock(&waited);
-        solve_max_coverage(&kept_cols, &weights, budget, &found.chosen, time_limit_s)
+        solve_max_coverage(&kept_cols, &weights, budget, &incumbent, time_limit_s)
     };
-    let solved = solved.map(|(status, chosen, bound)| {
-        (status, chosen.map(|c| c.iter().map(|&i| kept[i]).collect::<Vec<usize>>()), bound)
-    });
-    let seconds = t.elapsed().as_secs_f64() - waited.get();
     let search_bound = found.bound as f64;
-    let mut sel = match solved {
+    // Kept indices throughout; the ILP's selection replaces the incumbent only if it covers
+    // more, and a selection the ILP did not prove optimal gets the exchanges again.
+    let (status, mut chosen, bound) = match solved {
         Ok((status, chosen, bound)) => {
-            let chosen = chosen.filter(|c| value(c) > found.value).unwrap_or_else(|| found_chosen.clone());
-            let covered = value(&chosen);
-            let bound =
-                bound.unwrap_or(reachable as f64).min(search_bound).min(reachable as f64).max(covered as f64);
+            let chosen = chosen.filter(|c| value_of(&compact, c) > swapped).unwrap_or(incumbent);
             let status = match status {
                 HighsModelStatus::Optimal => "optimal".to_string(),
                 HighsModelStatus::ReachedTimeLimit => "time_limit".to_string(),
                 other => format!("error: HiGHS model status {other:?}"),
             };
-            Selection { chosen, covered, needed: reachable, status, bound, gap: 0.0, seconds }
+            (status, chosen, bound.unwrap_or(reachable as f64).min(search_bound))
         }
-        Err(message) => Selection {
-            covered: value(&found_chosen),
-            chosen: found_chosen.clone(),
-            needed: reachable,
-            status: format!("error: {message}"),
-            bound: search_bound,
-            gap: 0.0,
-            seconds,
-        },
+        Err(message) => (format!("error: {message}"), incumbent, search_bound),
     };
-    if sel.status == "optimal" {
-        // HiGHS proved it (gap 0): the bound is the objective.
+    if status != "optimal" {
+        improve_by_swaps(&compact, budget, &mut chosen, SWAP_PASSES);
+    }
+    let chosen: Vec<usize> = chosen.iter().map(|&i| kept[i]).collect();
+    let covered = value(&chosen);
+    let seconds = t.elapsed().as_secs_f64() - waited.get();
+    let bound = bound.min(reachable as f64).max(covered as f64);
+    let mut sel = Selection { chosen, covered, needed: reachable, status, bound, gap: 0.0, seconds };
+    if sel.status == "optimal" || sel.covered as f64 >= sel.bound {
+        // HiGHS proved it (gap 0), or the selection reaches a proven bound: the bound is the
+        // objective.
+        sel.status = "optimal".into();
         sel.bound = sel.covered as f64;
     }
     sel.gap = sel.bound - sel.covered as f64;
     sel
+}
+
+/// Elements the kept columns `chosen` cover (over `compact`'s bits).
+fn value_of(compact: &[Vec<u64>], chosen: &[usize]) -> usize {
+    let mut u = vec![0u64; compact.first().map_or(0, Vec::len)];
+    for &c in chosen {
+        for (w, x) in u.iter_mut().zip(&compact[c]) {
+            *w |= x;
+        }
+    }
+    count(&u)
 }
 
 /// Columns (ascending) not dominated by another: column a is dropped when some column b has a
@@ -545,6 +570,63 @@ mod tests {
             assert!(sel.chosen.len() <= budget);
         }
         assert!(handed_over >= 6, "only {handed_over} of 12 instances reached the ILP");
+    }
+
+    #[test]
+    fn a_stopped_selection_is_never_worse_than_the_exchanged_greedy_and_never_called_optimal_below_its_bound()
+    {
+        // No time at all: the cover shortcut, the branch and bound and the ILP all stop at once,
+        // so what comes back is the greedy selection after the exchanges (or better), with a
+        // proven bound; `optimal` only where the selection reaches that bound.
+        let mut rng = ChaCha8Rng::seed_from_u64(14);
+        let (mut stopped, mut exchanged) = (0, 0);
+        for trial in 0..40 {
+            let (n, m) = (rng.gen_range(10..=14), rng.gen_range(60..=120));
+            let p = rng.gen_range(0.1..0.3);
+            let covers = random_instance(&mut rng, n, m, p);
+            let needed = random_instance(&mut rng, 1, m, 0.9).remove(0);
+            let budget = rng.gen_range(2..=4);
+            let sel = max_coverage_in(&covers, &needed, budget, 0.0, 0.0);
+            let best = best_within(&covers, &needed, budget);
+            // The same greedy and exchanges on the plain instance (no grouping, no dominance):
+            // the grouped, reduced instance can only do at least as well.
+            let cols: Vec<Vec<u64>> =
+                covers.iter().map(|c| c.iter().zip(&needed).map(|(a, b)| a & b).collect()).collect();
+            let as_lists: Vec<Vec<usize>> =
+                cols.iter().map(|c| (0..m).filter(|&e| c[e >> 6] >> (e & 63) & 1 == 1).collect()).collect();
+            let mut greedy = greedy_max_coverage(&as_lists, &vec![1.0; m], budget);
+            let greedy_value = covered_by(&covers, &greedy, &needed);
+            let swapped =
+                super::super::swap_search::improve_by_swaps(&cols, budget, &mut greedy, SWAP_PASSES);
+            exchanged += usize::from(swapped > greedy_value);
+            assert!(sel.chosen.len() <= budget, "trial {trial}");
+            assert_eq!(sel.covered, covered_by(&covers, &sel.chosen, &needed), "trial {trial}");
+            assert!(
+                greedy_value <= sel.covered && sel.covered <= best,
+                "trial {trial}: {sel:?}, best {best}"
+            );
+            assert!(sel.bound >= best as f64, "trial {trial}: {sel:?}, best {best}");
+            assert_eq!(sel.gap, sel.bound - sel.covered as f64, "trial {trial}");
+            if sel.status == "optimal" {
+                assert_eq!((sel.covered, sel.gap), (best, 0.0), "trial {trial}");
+            } else {
+                stopped += 1;
+                assert!(sel.gap > 0.0, "trial {trial}: {sel:?}");
+            }
+        }
+        assert!(stopped >= 10 && exchanged >= 1, "stopped {stopped}, exchanged {exchanged}");
+    }
+
+    #[test]
+    fn exchanges_repair_a_greedy_trap_without_time() {
+        // A greedy trap with no time to search: only the exchanges reach the optimum. Elements
+        // 0..9, budget 2, no column dominated, no full cover within the budget: greedy takes
+        // {1..6} then {0..3} (7 elements); swapping {1..6} for {4..7} gives 8, the optimum.
+        let col = |es: &[usize]| vec![es.iter().fold(0u64, |w, &e| w | 1 << e)];
+        let covers = vec![col(&[1, 2, 3, 4, 5, 6]), col(&[0, 1, 2, 3]), col(&[4, 5, 6, 7]), col(&[8])];
+        let needed = col(&[0, 1, 2, 3, 4, 5, 6, 7, 8]);
+        let sel = max_coverage_in(&covers, &needed, 2, 0.0, 0.0);
+        assert_eq!((sel.chosen.clone(), sel.covered), (vec![1, 2], 8), "{sel:?}");
     }
 
     #[test]

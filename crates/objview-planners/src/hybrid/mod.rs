@@ -26,6 +26,7 @@ pub mod hpr;
 pub mod nbv;
 pub mod plan;
 pub mod steps;
+mod swap_search;
 
 use objview_episode::{ExecutionMode, Family};
 use serde::{Deserialize, Serialize};

@@ -548,6 +548,17 @@ mod tests {
         }
     }
 
+    /// A random instance whose budget (2–4 of `min_n`–14 columns) is usually below full
+    /// coverage: (covers, needed, budget, columns).
+    fn small_budget_instance(rng: &mut ChaCha8Rng, min_n: usize) -> (Vec<Vec<u64>>, Vec<u64>, usize, usize) {
+        let (n, m) = (rng.gen_range(min_n..=14), rng.gen_range(60..=120));
+        let p = rng.gen_range(0.1..0.3);
+        let covers = random_instance(rng, n, m, p);
+        let needed = random_instance(rng, 1, m, 0.9).remove(0);
+        let budget = rng.gen_range(2..=4);
+        (covers, needed, budget, n)
+    }
+
     #[test]
     fn a_stopped_search_hands_over_to_the_ilp() {
         // With a search share of 0 the branch and bound stops at its root, and the HiGHS ILP
@@ -555,11 +566,7 @@ mod tests {
         let mut rng = ChaCha8Rng::seed_from_u64(13);
         let mut handed_over = 0;
         for trial in 0..12 {
-            let (n, m) = (rng.gen_range(12..=14), rng.gen_range(60..=120));
-            let p = rng.gen_range(0.1..0.3);
-            let covers = random_instance(&mut rng, n, m, p);
-            let needed = random_instance(&mut rng, 1, m, 0.9).remove(0);
-            let budget = rng.gen_range(2..=4);
+            let (covers, needed, budget, n) = small_budget_instance(&mut rng, 12);
             let sel = max_coverage_in(&covers, &needed, budget, 10.0, 0.0);
             let best = best_within(&covers, &needed, budget);
             // Below full coverage neither shortcut applies, and the search stops at its root.
@@ -581,15 +588,12 @@ mod tests {
         let mut rng = ChaCha8Rng::seed_from_u64(14);
         let (mut stopped, mut exchanged) = (0, 0);
         for trial in 0..40 {
-            let (n, m) = (rng.gen_range(10..=14), rng.gen_range(60..=120));
-            let p = rng.gen_range(0.1..0.3);
-            let covers = random_instance(&mut rng, n, m, p);
-            let needed = random_instance(&mut rng, 1, m, 0.9).remove(0);
-            let budget = rng.gen_range(2..=4);
+            let (covers, needed, budget, _) = small_budget_instance(&mut rng, 10);
+            let m = needed.len() * 64;
             let sel = max_coverage_in(&covers, &needed, budget, 0.0, 0.0);
             let best = best_within(&covers, &needed, budget);
-            // The same greedy and exchanges on the plain instance (no grouping, no dominance):
-            // the grouped, reduced instance can only do at least as well.
+            // Greedy and the exchanges on the plain instance (no grouping, no dominance): only
+            // to check that these instances give the exchanges something to do.
             let cols: Vec<Vec<u64>> =
                 covers.iter().map(|c| c.iter().zip(&needed).map(|(a, b)| a & b).collect()).collect();
             let as_lists: Vec<Vec<usize>> =

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Output-stability check for refactors: runs a fixed set of commands with one objview binary
-# into OUT (annotate, pool split, run --no-timings for every planner in two view spaces and
+# into OUT (annotate, pool split, run --no-timings for every classical planner in two view spaces and
 # budgets, report --no-plots) with timing fields that vary by design removed, so that two
 # binaries can be compared with `diff -r OUT_A OUT_B`:
 #

@@ -295,6 +295,11 @@ impl SuperGrid {
 /// is millions of ulps at the metric domains' scale (coordinates of order 1) and far below h.
 const FACE_MARGIN: f64 = 1e-9;
 
+/// [`nearest_in`] and [`nearest_in_block`] scan the second layer of voxels around a point
+/// ([`scan_ring2`]) when its best after the first is at most this many h² (an answer within 3h
+/// may well lie in it; farther ones — unseen surfaces — go straight to the block search).
+const RING2_TRY: f64 = 9.0;
+
 /// Lowers `best` (`(d², index)`, ties → the smaller index; a `NONE` index is a bound, not a
 /// point) to the nearest point of `set` to `p` among the 27 fine voxels around `k` (p's own
 /// voxel): the same answer as showing every point of those voxels to the comparison, without
@@ -349,9 +354,83 @@ pub(crate) fn scan_around<S: Bucketed>(set: &S, p: [f64; 3], k: [i32; 3], best: 
     }
 }
 
+/// The next layer after [`scan_around`]: lowers `best` over the fine voxels at Chebyshev
+/// distance 2 from `k` (p's voxel) that could hold something closer — per voxel, the sum over
+/// the axes of the squared gap from `p` to it (the neighbour face's gap, plus one voxel width
+/// for the outer layer, less [`FACE_MARGIN`]) must not exceed the best so far — and returns
+/// whether that settles the search: true when `best` is at most the squared gap from `p` to
+/// the faces of the 5×5×5 voxels around `k` (less the margin), which every other point lies
+/// beyond. Meant for answers just beyond h — a fused point whose nearest ground-truth sample
+/// lies past its 27 voxels, the sample being sparser than the fusion grid — which would
+/// otherwise take the whole-block search of [`nearest_in_block`]. Skipped voxels only ever held
+/// points strictly farther than the best at that moment, so the answer (ties included) is that
+/// of showing every point of the 125 voxels to the comparison.
+pub(crate) fn scan_ring2<S: Bucketed>(set: &S, p: [f64; 3], k: [i32; 3], best: &mut (f64, u32)) -> bool {
+    let consider = |best: &mut (f64, u32), i: u32, q: [f64; 3]| {
+        let d = dist2(p, q);
+        if d < best.0 || (d == best.0 && best.1 != NONE && i < best.1) {
+            *best = (d, i);
+        }
+    };
+    let h = set.domain().h;
+    // Per axis, the squared gap from p to the voxel at offset −2..=2 (0 for its own layer),
+    // and the gap to the outside of the 5×5×5 voxels.
+    let mut gap = [[0.0f64; 5]; 3];
+    let mut outer = f64::INFINITY;
+    for a in 0..3 {
+        let g = |lo_face: i32, below: bool| {
+            let x = if below { p[a] - lo_face as f64 * h } else { lo_face as f64 * h - p[a] };
+            (x - FACE_MARGIN).max(0.0)
+        };
+        let (l1, l2, l3) = (g(k[a], true), g(k[a] - 1, true), g(k[a] - 2, true));
+        let (u1, u2, u3) = (g(k[a] + 1, false), g(k[a] + 2, false), g(k[a] + 3, false));
+        gap[a] = [l2 * l2, l1 * l1, 0.0, u1 * u1, u2 * u2];
+        outer = outer.min(l3).min(u3);
+    }
+    // Inner layers first (their gaps are smaller), the outer ones last.
+    const ORDER: [i32; 5] = [0, -1, 1, -2, 2];
+    for dz in ORDER {
+        let gz = gap[2][(dz + 2) as usize];
+        if gz > best.0 {
+            continue;
+        }
+        for dy in ORDER {
+            let gyz = gz + gap[1][(dy + 2) as usize];
+            if gyz > best.0 {
+                continue;
+            }
+            let (y, z) = (k[1] + dy, k[2] + dz);
+            if dy.abs() < 2 && dz.abs() < 2 {
+                // A row through the 27 voxels: only its two outer voxels are in the layer.
+                for dx in [-2, 2] {
+                    if gyz + gap[0][(dx + 2) as usize] <= best.0 {
+                        let x = k[0] + dx;
+                        set.for_cells_in_box([x, y, z], [x, y, z], |i, q| consider(best, i, q));
+                    }
+                }
+                continue;
+            }
+            // A row of the outer layer: its voxels as far out as the gaps allow (they grow
+            // away from p's column).
+            let (mut x0, mut x1) = (0, 0);
+            while x0 > -2 && gyz + gap[0][(x0 + 1) as usize] <= best.0 {
+                x0 -= 1;
+            }
+            while x1 < 2 && gyz + gap[0][(x1 + 3) as usize] <= best.0 {
+                x1 += 1;
+            }
+            if gyz + gap[0][(x0 + 2) as usize] <= best.0 {
+                set.for_cells_in_box([k[0] + x0, y, z], [k[0] + x1, y, z], |i, q| consider(best, i, q));
+            }
+        }
+    }
+    best.0 <= outer * outer
+}
+
 /// The nearest point of `set` to `p` with squared distance below `bound2` (exact; ties →
 /// the smaller index): `(d², index)`, or `(bound2, NONE)` when there is none. The 27 fine voxels
-/// around p first (anything outside them is ≥ h away), then rings of superblocks (after ring R
+/// around p first (anything outside them is ≥ h away), then, for a best within 3h, the next
+/// layer of voxels ([`scan_ring2`]), then rings of superblocks (after ring R
 /// everything unseen is ≥ R·E away, E the superblock edge), visiting the occupied blocks of each
 /// superblock that could hold something closer, pruned by their boxes.
 pub fn nearest_in<S: Bucketed>(set: &S, p: [f64; 3], bound2: f64) -> (f64, u32) {
@@ -367,7 +446,7 @@ pub fn nearest_in<S: Bucketed>(set: &S, p: [f64; 3], bound2: f64) -> (f64, u32) 
     let k = domain.key(p);
     // Any order: `consider` keeps the smallest (d², index) of what it is shown.
     scan_around(set, p, k, &mut best);
-    if best.0 <= h * h {
+    if best.0 <= h * h || (best.0 <= RING2_TRY * h * h && scan_ring2(set, p, k, &mut best)) {
         return best;
     }
     let grid = set.supergrid();
@@ -570,8 +649,11 @@ pub fn nearest_in_block<S: Bucketed>(
             }
         };
         // Anything outside the 27 voxels around p is at least h away.
-        scan_around(set, p, domain.key(p), &mut best);
-        if best.0 <= h2 {
+        let k = domain.key(p);
+        scan_around(set, p, k, &mut best);
+        // An answer within 3h is likely just beyond the 27 voxels: the next layer of voxels
+        // (see `scan_ring2`) before the search of whole blocks.
+        if best.0 <= h2 || (best.0 <= RING2_TRY * h2 && scan_ring2(set, p, k, &mut best)) {
             if best.1 != NONE {
                 prev = best.1;
             }
@@ -1000,8 +1082,10 @@ mod tests {
     }
 
     /// The full 27-voxel scan that [`scan_around`] prunes.
-    fn scan_all<S: Bucketed>(set: &S, p: [f64; 3], k: [i32; 3], best: &mut (f64, u32)) {
-        set.for_cells_around(k, |i, q| {
+    /// Shows every point of the fine voxels within Chebyshev distance `r` of `k` to the
+    /// comparison of the scans.
+    fn scan_all<S: Bucketed>(set: &S, p: [f64; 3], k: [i32; 3], r: i32, best: &mut (f64, u32)) {
+        set.for_cells_in_box(k.map(|x| x - r), k.map(|x| x + r), |i, q| {
             let d = dist2(p, q);
             if d < best.0 || (d == best.0 && best.1 != NONE && i < best.1) {
                 *best = (d, i);
@@ -1009,15 +1093,31 @@ mod tests {
         });
     }
 
-    #[test]
-    fn pruned_27_voxel_scans_equal_full_ones() {
+    /// Runs `check(target set, fused cloud, points, query, its key, starting bound)` on
+    /// `trials` queries against a point set built for ties and roundings: points on a lattice
+    /// of voxel faces and corners (exact ties between voxels, points a rounding away from their
+    /// voxel's box), duplicated (ties of the index rule), plus a random cloud sparse enough
+    /// (4,000 points in 0.2³, h = 0.005) that many answers lie a voxel or two away; as a target
+    /// set (several points per voxel) and as a fused cloud (one per voxel). Queries lie on or a
+    /// rounding away from the lattice, or near a point; starting bounds are none, a point's
+    /// distance (as the block searches start), a random value, or a tie away.
+    fn tie_heavy_queries(
+        seed: u64,
+        trials: usize,
+        mut check: impl FnMut(
+            &crate::chamfer::Targets,
+            &FusedCloud,
+            &[[f64; 3]],
+            [f64; 3],
+            [i32; 3],
+            (f64, u32),
+            usize,
+        ),
+    ) {
         use rand::{Rng, SeedableRng};
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(41);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let h = 0.005;
         let domain = Domain::covering(h, [-0.2; 3], [0.2; 3], 0.0);
-        // Points on a lattice of voxel faces and corners (exact ties between voxels, points a
-        // rounding away from their voxel's box), duplicated (ties of the index rule), plus a
-        // random cloud; the fused cloud holds one point per voxel, the target set several.
         let mut pts: Vec<[f64; 3]> = Vec::new();
         for _ in 0..4000 {
             let lattice = |rng: &mut rand_chacha::ChaCha8Rng| rng.gen_range(-20..20) as f64 * h;
@@ -1034,8 +1134,7 @@ mod tests {
         let targets = crate::chamfer::Targets::new(domain.clone(), &pts, f64::INFINITY).unwrap();
         let mut fused = FusedCloud::new(domain.clone());
         fused.insert(&pts);
-        let (mut pruned_hits, mut far) = (0, 0);
-        for trial in 0..20_000 {
+        for trial in 0..trials {
             let near = |rng: &mut rand_chacha::ChaCha8Rng| {
                 let x = rng.gen_range(-20..20) as f64 * h;
                 match rng.gen_range(0..3) {
@@ -1050,8 +1149,6 @@ mod tests {
                 pts[rng.gen_range(0..pts.len())].map(|x| x + rng.gen_range(-2.0..2.0) * h)
             };
             let k = domain.key(p);
-            // Starting bounds: none, a point's distance (as the block searches start), and
-            // values a tie away.
             let some = pts[rng.gen_range(0..pts.len())];
             let start = match trial % 4 {
                 0 => (f64::INFINITY, NONE),
@@ -1059,18 +1156,75 @@ mod tests {
                 2 => (rng.gen_range(0.0..4.0) * h * h, NONE),
                 _ => (dist2(p, some), 0),
             };
+            check(&targets, &fused, &pts, p, k, start, trial);
+        }
+    }
+
+    #[test]
+    fn pruned_27_voxel_scans_equal_full_ones() {
+        let (mut pruned_hits, mut far) = (0, 0);
+        tie_heavy_queries(41, 20_000, |targets, fused, _, p, k, start, trial| {
             let (mut a, mut b) = (start, start);
-            scan_around(&targets, p, k, &mut a);
-            scan_all(&targets, p, k, &mut b);
+            scan_around(targets, p, k, &mut a);
+            scan_all(targets, p, k, 1, &mut b);
             assert_eq!(a, b, "targets, trial {trial}: {p:?}");
             let (mut a, mut b) = (start, start);
-            scan_around(&fused, p, k, &mut a);
-            scan_all(&fused, p, k, &mut b);
+            scan_around(fused, p, k, &mut a);
+            scan_all(fused, p, k, 1, &mut b);
             assert_eq!(a, b, "fused, trial {trial}: {p:?}");
             pruned_hits += (a.1 != start.1) as usize;
-            far += (a.0 > h * h) as usize;
-        }
+            far += (a.0 > 0.005 * 0.005) as usize;
+        });
         assert!(pruned_hits > 5000 && far > 1000, "cases: {pruned_hits} improved, {far} far");
+    }
+
+    #[test]
+    fn the_second_layer_scan_equals_a_full_one_and_settles_only_exact_answers() {
+        let h2 = 0.005 * 0.005;
+        let (mut settled_beyond_h, mut unsettled) = (0, 0);
+        tie_heavy_queries(42, 20_000, |targets, fused, pts, p, k, start, trial| {
+            for (name, settled, a, b) in [
+                {
+                    let (mut a, mut b) = (start, start);
+                    scan_around(targets, p, k, &mut a);
+                    let settled = scan_ring2(targets, p, k, &mut a);
+                    scan_all(targets, p, k, 2, &mut b);
+                    ("targets", settled, a, b)
+                },
+                {
+                    let (mut a, mut b) = (start, start);
+                    scan_around(fused, p, k, &mut a);
+                    let settled = scan_ring2(fused, p, k, &mut a);
+                    scan_all(fused, p, k, 2, &mut b);
+                    ("fused", settled, a, b)
+                },
+            ] {
+                // The same answer as every point of the 125 voxels, index included.
+                assert_eq!(a, b, "{name}, trial {trial}: {p:?}");
+                if settled {
+                    // Nothing anywhere is strictly closer (the fused cloud's points are a
+                    // subset of `pts`: its centroids of duplicates are the points themselves).
+                    let closest = pts.iter().map(|&q| dist2(p, q)).fold(f64::INFINITY, f64::min);
+                    let set_min = if name == "fused" {
+                        fused.pos.iter().map(|&q| dist2(p, q)).fold(f64::INFINITY, f64::min)
+                    } else {
+                        closest
+                    };
+                    assert!(
+                        set_min >= a.0 || a.1 == NONE && set_min >= start.0,
+                        "{name}, trial {trial}: {p:?}"
+                    );
+                    assert!(a.1 == NONE || set_min == a.0, "{name}, trial {trial}: {p:?}");
+                    settled_beyond_h += (a.0 > h2 && a.1 != NONE) as usize;
+                } else {
+                    unsettled += 1;
+                }
+            }
+        });
+        assert!(
+            settled_beyond_h > 2000 && unsettled > 1000,
+            "cases: {settled_beyond_h} settled beyond h, {unsettled} not"
+        );
     }
 
     #[test]

@@ -35,8 +35,8 @@
 
 use crate::fusion::FusedCloud;
 use crate::grid::{
-    block_of, dist2, keyed_points, local_index, nearest_in, nearest_in_block, runs_in_box, Aabb, BlockSearch,
-    Bucketed, ChangedBlocks, Domain, SuperGrid, BLOCK_CELLS, NONE,
+    block_of, dist2, keyed_points, local_index, lower_best_over, nearest_in, nearest_in_block, runs_in_box,
+    Aabb, BlockSearch, Bucketed, ChangedBlocks, Domain, SuperGrid, BLOCK_CELLS, NONE,
 };
 use rayon::prelude::*;
 
@@ -780,6 +780,15 @@ impl Bucketed for Targets {
             for i in self.ix.block_range(t) {
                 f(i as u32, self.ix.pts[i]);
             }
+        }
+    }
+    fn lower_best_in_block(&self, b: [i32; 3], p: [f64; 3], best: &mut (f64, u32)) {
+        let Some(bi) = self.ix.domain.block_index(b) else { return };
+        let t = self.ix.table[bi];
+        if t != NONE {
+            let r = self.ix.block_range(t);
+            let first = r.start as u32;
+            lower_best_over(&self.ix.pts[r], |j| first + j as u32, p, best);
         }
     }
     fn supergrid(&self) -> &SuperGrid {

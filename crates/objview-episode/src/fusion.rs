@@ -9,8 +9,8 @@
 //! only around them.
 
 use crate::grid::{
-    block_of, local_index, nearest_in, runs_in_box, Bucketed, Domain, SuperGrid, SuperHandle, BLOCK_CELLS,
-    NONE,
+    block_of, local_index, lower_best_over, nearest_in, runs_in_box, Bucketed, Domain, SuperGrid,
+    SuperHandle, BLOCK_CELLS, NONE,
 };
 
 /// One allocated block: the slot of each of its fine voxels and the list of its slots.
@@ -368,6 +368,11 @@ impl Bucketed for FusedCloud {
             for (&s, &q) in blk.slots.iter().zip(&blk.centroids) {
                 f(s, q);
             }
+        }
+    }
+    fn lower_best_in_block(&self, b: [i32; 3], p: [f64; 3], best: &mut (f64, u32)) {
+        if let Some(blk) = self.domain.block_index(b).and_then(|bi| self.block_at(bi)) {
+            lower_best_over(&blk.centroids, |j| blk.slots[j], p, best);
         }
     }
     fn supergrid(&self) -> &SuperGrid {

@@ -126,6 +126,60 @@ pub trait Bucketed {
     fn for_cells_in_box<F: FnMut(u32, [f64; 3])>(&self, lo: [i32; 3], hi: [i32; 3], f: F);
     /// The position of point `index`.
     fn position(&self, index: u32) -> [f64; 3];
+    /// Lowers `best` (`(d², index)`; ties → the smaller index; a `NONE` index is a bound, not a
+    /// point) over every point of the block with block key `b`: what showing them one by one to
+    /// the scans' comparison gives. Stores with contiguous block points override it with
+    /// [`lower_best_over`].
+    fn lower_best_in_block(&self, b: [i32; 3], p: [f64; 3], best: &mut (f64, u32)) {
+        self.for_block(b, |i, q| {
+            let d = dist2(p, q);
+            if d < best.0 || (d == best.0 && best.1 != NONE && i < best.1) {
+                *best = (d, i);
+            }
+        });
+    }
+}
+
+/// [`Bucketed::lower_best_in_block`] over the points `pts` named `index(j)`, in two passes: the
+/// smallest d² over all of them (branch-free, in lanes that the compiler vectorizes; a minimum
+/// does not depend on the order it is taken in), and only where that can change `best`, the
+/// smallest index among the points at it. The result is the smallest (d², index) of `best` and
+/// the points — what the one-by-one comparison keeps, whatever the order — so the same bits.
+#[inline]
+pub(crate) fn lower_best_over(
+    pts: &[[f64; 3]],
+    index: impl Fn(usize) -> u32,
+    p: [f64; 3],
+    best: &mut (f64, u32),
+) {
+    const L: usize = 4;
+    let mut m = [f64::INFINITY; L];
+    let chunks = pts.chunks_exact(L);
+    let rest = chunks.remainder();
+    for c in chunks {
+        for l in 0..L {
+            let d = dist2(p, c[l]);
+            m[l] = if d < m[l] { d } else { m[l] };
+        }
+    }
+    let mut min = m.iter().fold(f64::INFINITY, |a, &b| if b < a { b } else { a });
+    for &q in rest {
+        let d = dist2(p, q);
+        min = if d < min { d } else { min };
+    }
+    // Nothing below the bound, or only ties with a bound that is not a point.
+    if min > best.0 || (min == best.0 && best.1 == NONE) {
+        return;
+    }
+    let mut at = u32::MAX;
+    for (j, &q) in pts.iter().enumerate() {
+        if dist2(p, q) == min {
+            at = at.min(index(j));
+        }
+    }
+    if min < best.0 || at < best.1 {
+        *best = (min, at);
+    }
 }
 
 /// Test helper: for 3,000 random keys in [−24, 24)³, what `for_cells_around(k)` shows must be
@@ -435,16 +489,10 @@ pub(crate) fn scan_ring2<S: Bucketed>(set: &S, p: [f64; 3], k: [i32; 3], best: &
 /// superblock that could hold something closer, pruned by their boxes.
 pub fn nearest_in<S: Bucketed>(set: &S, p: [f64; 3], bound2: f64) -> (f64, u32) {
     let mut best = (bound2, NONE);
-    let consider = |best: &mut (f64, u32), i: u32, q: [f64; 3]| {
-        let d = dist2(p, q);
-        if d < best.0 || (d == best.0 && best.1 != NONE && i < best.1) {
-            *best = (d, i);
-        }
-    };
     let domain = set.domain();
     let h = domain.h;
     let k = domain.key(p);
-    // Any order: `consider` keeps the smallest (d², index) of what it is shown.
+    // Any order: the comparison keeps the smallest (d², index) of what it is shown.
     scan_around(set, p, k, &mut best);
     if best.0 <= h * h || (best.0 <= RING2_TRY * h * h && scan_ring2(set, p, k, &mut best)) {
         return best;
@@ -463,7 +511,7 @@ pub fn nearest_in<S: Bucketed>(set: &S, p: [f64; 3], bound2: f64) -> (f64, u32) 
             }
             for (b, aabb) in grid.blocks(s) {
                 if aabb.dist2(p) < best.0 {
-                    set.for_block(*b, |i, q| consider(&mut best, i, q));
+                    set.lower_best_in_block(*b, p, &mut best);
                 }
             }
         });
@@ -642,12 +690,6 @@ pub fn nearest_in_block<S: Bucketed>(
             b0 = b0.min(above(dist2(p, set.position(prev))));
         }
         let mut best = (b0, NONE);
-        let consider = |best: &mut (f64, u32), i: u32, q: [f64; 3]| {
-            let d = dist2(p, q);
-            if d < best.0 || (d == best.0 && best.1 != NONE && i < best.1) {
-                *best = (d, i);
-            }
-        };
         // Anything outside the 27 voxels around p is at least h away.
         let k = domain.key(p);
         scan_around(set, p, k, &mut best);
@@ -680,7 +722,7 @@ pub fn nearest_in_block<S: Bucketed>(
             if slab.lb2(p) >= best.0 {
                 continue;
             }
-            set.for_block(*b, |i, q| consider(&mut best, i, q));
+            set.lower_best_in_block(*b, p, &mut best);
         }
         // Nothing found below the start bound only when that bound was `bound2` (q₀ and the
         // predecessor's answer are always found): `(bound2, NONE)`, as nearest_in.
@@ -1158,6 +1200,59 @@ mod tests {
             };
             check(&targets, &fused, &pts, p, k, start, trial);
         }
+    }
+
+    #[test]
+    fn block_minima_equal_one_by_one_comparisons() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(44);
+        let mut changed = 0;
+        for trial in 0..5000 {
+            // Points on a coarse lattice (many exact ties), some duplicated, named by distinct
+            // indices in random order; every length from empty to a few lanes plus a remainder.
+            let n = rng.gen_range(0..24);
+            let lattice =
+                |rng: &mut rand_chacha::ChaCha8Rng| [0; 3].map(|_: i32| rng.gen_range(-2..3) as f64 * 0.25);
+            let mut pts: Vec<[f64; 3]> = Vec::new();
+            while pts.len() < n {
+                let q = if !pts.is_empty() && rng.gen_bool(0.2) {
+                    pts[rng.gen_range(0..pts.len())]
+                } else {
+                    lattice(&mut rng)
+                };
+                pts.push(q);
+            }
+            let mut names: Vec<u32> = (0..n as u32).map(|j| j * 3 + 1).collect();
+            for j in (1..names.len()).rev() {
+                names.swap(j, rng.gen_range(0..=j));
+            }
+            let p = lattice(&mut rng);
+            let tie = |rng: &mut rand_chacha::ChaCha8Rng| {
+                if pts.is_empty() {
+                    1.0
+                } else {
+                    dist2(p, pts[rng.gen_range(0..pts.len())])
+                }
+            };
+            let start = match trial % 4 {
+                0 => (f64::INFINITY, NONE),
+                1 => (tie(&mut rng), NONE),
+                2 => (tie(&mut rng), rng.gen_range(0..3 * n as u32 + 2)),
+                _ => (rng.gen_range(0.0..1.0), NONE),
+            };
+            let mut want = start;
+            for (j, &q) in pts.iter().enumerate() {
+                let d = dist2(p, q);
+                if d < want.0 || (d == want.0 && want.1 != NONE && names[j] < want.1) {
+                    want = (d, names[j]);
+                }
+            }
+            let mut got = start;
+            lower_best_over(&pts, |j| names[j], p, &mut got);
+            assert_eq!(got, want, "trial {trial}: {pts:?} from {p:?}, start {start:?}");
+            changed += (got != start) as usize;
+        }
+        assert!(changed > 2000, "the cases should improve the bound: {changed}");
     }
 
     #[test]

@@ -131,12 +131,17 @@ pub trait Bucketed {
     /// the scans' comparison gives. Stores with contiguous block points override it with
     /// [`lower_best_over`].
     fn lower_best_in_block(&self, b: [i32; 3], p: [f64; 3], best: &mut (f64, u32)) {
-        self.for_block(b, |i, q| {
-            let d = dist2(p, q);
-            if d < best.0 || (d == best.0 && best.1 != NONE && i < best.1) {
-                *best = (d, i);
-            }
-        });
+        self.for_block(b, |i, q| lower_best(best, dist2(p, q), i));
+    }
+}
+
+/// The scans' comparison: point `i` at squared distance `d` replaces `best` (`(d², index)`)
+/// when it is closer, or as close with a smaller index — a `NONE` index is a bound, not a
+/// point, so a point exactly at it does not count.
+#[inline(always)]
+fn lower_best(best: &mut (f64, u32), d: f64, i: u32) {
+    if d < best.0 || (d == best.0 && best.1 != NONE && i < best.1) {
+        *best = (d, i);
     }
 }
 
@@ -364,12 +369,7 @@ const RING2_TRY: f64 = 9.0;
 /// that moment, which only decreases, so they could neither win nor tie.
 #[inline]
 pub(crate) fn scan_around<S: Bucketed>(set: &S, p: [f64; 3], k: [i32; 3], best: &mut (f64, u32)) {
-    let consider = |best: &mut (f64, u32), i: u32, q: [f64; 3]| {
-        let d = dist2(p, q);
-        if d < best.0 || (d == best.0 && best.1 != NONE && i < best.1) {
-            *best = (d, i);
-        }
-    };
+    let consider = |best: &mut (f64, u32), i: u32, q: [f64; 3]| lower_best(best, dist2(p, q), i);
     let h = set.domain().h;
     // Squared gaps to the lower and upper neighbour voxel per axis (0 when p is within the
     // margin of that face).
@@ -420,20 +420,16 @@ pub(crate) fn scan_around<S: Bucketed>(set: &S, p: [f64; 3], k: [i32; 3], best: 
 /// points strictly farther than the best at that moment, so the answer (ties included) is that
 /// of showing every point of the 125 voxels to the comparison.
 pub(crate) fn scan_ring2<S: Bucketed>(set: &S, p: [f64; 3], k: [i32; 3], best: &mut (f64, u32)) -> bool {
-    let consider = |best: &mut (f64, u32), i: u32, q: [f64; 3]| {
-        let d = dist2(p, q);
-        if d < best.0 || (d == best.0 && best.1 != NONE && i < best.1) {
-            *best = (d, i);
-        }
-    };
+    let consider = |best: &mut (f64, u32), i: u32, q: [f64; 3]| lower_best(best, dist2(p, q), i);
     let h = set.domain().h;
     // Per axis, the squared gap from p to the voxel at offset −2..=2 (0 for its own layer),
     // and the gap to the outside of the 5×5×5 voxels.
     let mut gap = [[0.0f64; 5]; 3];
     let mut outer = f64::INFINITY;
     for a in 0..3 {
-        let g = |lo_face: i32, below: bool| {
-            let x = if below { p[a] - lo_face as f64 * h } else { lo_face as f64 * h - p[a] };
+        // The gap to the voxel face at plane index `plane`, which lies below p or above it.
+        let g = |plane: i32, below: bool| {
+            let x = if below { p[a] - plane as f64 * h } else { plane as f64 * h - p[a] };
             (x - FACE_MARGIN).max(0.0)
         };
         let (l1, l2, l3) = (g(k[a], true), g(k[a] - 1, true), g(k[a] - 2, true));
@@ -473,9 +469,8 @@ pub(crate) fn scan_ring2<S: Bucketed>(set: &S, p: [f64; 3], k: [i32; 3], best: &
             while x1 < 2 && gyz + gap[0][(x1 + 3) as usize] <= best.0 {
                 x1 += 1;
             }
-            if gyz + gap[0][(x0 + 2) as usize] <= best.0 {
-                set.for_cells_in_box([k[0] + x0, y, z], [k[0] + x1, y, z], |i, q| consider(best, i, q));
-            }
+            // (p's own column, gap 0, is always admitted: gyz ≤ best above.)
+            set.for_cells_in_box([k[0] + x0, y, z], [k[0] + x1, y, z], |i, q| consider(best, i, q));
         }
     }
     best.0 <= outer * outer
@@ -1268,16 +1263,16 @@ mod tests {
             scan_all(fused, p, k, 1, &mut b);
             assert_eq!(a, b, "fused, trial {trial}: {p:?}");
             pruned_hits += (a.1 != start.1) as usize;
-            far += (a.0 > 0.005 * 0.005) as usize;
+            far += (a.0 > fused.domain.h * fused.domain.h) as usize;
         });
         assert!(pruned_hits > 5000 && far > 1000, "cases: {pruned_hits} improved, {far} far");
     }
 
     #[test]
     fn the_second_layer_scan_equals_a_full_one_and_settles_only_exact_answers() {
-        let h2 = 0.005 * 0.005;
         let (mut settled_beyond_h, mut unsettled) = (0, 0);
         tie_heavy_queries(42, 20_000, |targets, fused, pts, p, k, start, trial| {
+            let h2 = fused.domain.h * fused.domain.h;
             for (name, settled, a, b) in [
                 {
                     let (mut a, mut b) = (start, start);
@@ -1297,18 +1292,12 @@ mod tests {
                 // The same answer as every point of the 125 voxels, index included.
                 assert_eq!(a, b, "{name}, trial {trial}: {p:?}");
                 if settled {
-                    // Nothing anywhere is strictly closer (the fused cloud's points are a
-                    // subset of `pts`: its centroids of duplicates are the points themselves).
-                    let closest = pts.iter().map(|&q| dist2(p, q)).fold(f64::INFINITY, f64::min);
-                    let set_min = if name == "fused" {
-                        fused.pos.iter().map(|&q| dist2(p, q)).fold(f64::INFINITY, f64::min)
-                    } else {
-                        closest
-                    };
-                    assert!(
-                        set_min >= a.0 || a.1 == NONE && set_min >= start.0,
-                        "{name}, trial {trial}: {p:?}"
-                    );
+                    // Nothing anywhere in the set is strictly closer (brute force over the
+                    // target points, or over the fused cloud's centroids). Without a point
+                    // found, `a` is still the starting bound.
+                    let all: &[[f64; 3]] = if name == "fused" { &fused.pos } else { pts };
+                    let set_min = all.iter().map(|&q| dist2(p, q)).fold(f64::INFINITY, f64::min);
+                    assert!(set_min >= a.0, "{name}, trial {trial}: {p:?}");
                     assert!(a.1 == NONE || set_min == a.0, "{name}, trial {trial}: {p:?}");
                     settled_beyond_h += (a.0 > h2 && a.1 != NONE) as usize;
                 } else {

@@ -332,10 +332,12 @@ impl Targets {
         slot_min
     }
 
-    /// Every distance searched again (see [`Targets::update`]): the targets of each target
-    /// block in one batched search of the fused cloud, and the changed slots of each block in
-    /// one batched search of the targets.
-    fn pull(&mut self, fused: &FusedCloud, changed: &[u32]) -> Vec<f64> {
+    /// Every target's distance searched again against the whole of `fused`, the targets of each
+    /// target block in one batched search ([`nearest_in_block`]), with no fused → target
+    /// distances: what [`Targets::counts`] needs after one insertion of a whole cloud (the
+    /// observable reference's SC). With a cap, only distances below it are searched. Later
+    /// [`Targets::update`]s continue from here (every slot of `fused` counts as seen).
+    pub fn settle(&mut self, fused: &FusedCloud) {
         self.epoch += 1;
         self.seen = fused.epoch();
         let h2 = self.ix.domain.h * self.ix.domain.h;
@@ -353,6 +355,14 @@ impl Targets {
             (self.d2[i], self.nn[i]) = if s == NONE { (f64::INFINITY, NONE) } else { (d, s) };
         }
         self.far = (0..self.d2.len() as u32).filter(|&i| self.d2[i as usize] > h2).collect();
+    }
+
+    /// Every distance searched again (see [`Targets::update`]): the targets of each target
+    /// block in one batched search of the fused cloud, and the changed slots of each block in
+    /// one batched search of the targets.
+    fn pull(&mut self, fused: &FusedCloud, changed: &[u32]) -> Vec<f64> {
+        self.settle(fused);
+        let ix = &*self.ix;
         // Fused → target: the changed slots grouped by the block their position lies in.
         let mut by_block: Vec<(usize, u32)> = changed
             .iter()
@@ -643,6 +653,48 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    #[test]
+    fn settled_distances_equal_brute_force_and_updates_continue_from_them() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.05);
+        let mut tp: Vec<[f64; 3]> = patch(&mut rng, 4000);
+        tp.extend(patch(&mut rng, 500).iter().map(|p| [p[0] * 0.5, p[1] * 0.5, p[2] * 0.5]));
+        let taus = [0.01, 0.02, 0.03];
+        for cap in [f64::INFINITY, 0.03] {
+            let mut fused = FusedCloud::new(domain.clone());
+            // Settled once after the second insertion, then brought along by `update`.
+            let mut carried = Targets::new(domain.clone(), &tp, cap).unwrap();
+            let mut seen = 0;
+            for step in 0..6 {
+                fused.insert(&patch(&mut rng, 6000));
+                let want = brute(&carried, &fused, cap * cap);
+                // A fresh set settled on the cloud as it is now.
+                let mut fresh = Targets::new(domain.clone(), &tp, cap).unwrap();
+                fresh.settle(&fused);
+                assert_eq!(fresh.d2, want, "cap {cap} step {step}: settled");
+                // Counts below the cap are those of the exact distances.
+                let mut exact = Targets::new(domain.clone(), &tp, f64::INFINITY).unwrap();
+                exact.settle(&fused);
+                assert_eq!(fresh.counts(&taus), exact.counts(&taus), "cap {cap} step {step}");
+                if step == 1 {
+                    carried.settle(&fused);
+                    seen = fused.epoch();
+                } else if step > 1 {
+                    let changed = fused.changed_since(seen);
+                    seen = fused.epoch();
+                    carried.update(&fused, &changed);
+                }
+                if step >= 1 {
+                    assert_eq!(carried.d2, want, "cap {cap} step {step}: updated after settling");
+                }
+            }
+            // Some targets lie beyond the cap (the inner sphere) and some within it.
+            let n_inf = carried.d2.iter().filter(|d| d.is_infinite()).count();
+            assert!(n_inf > 0 || cap.is_infinite());
+            assert!(n_inf < carried.len());
         }
     }
 

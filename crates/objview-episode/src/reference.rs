@@ -185,10 +185,13 @@ pub fn observable_reference(
         fused.insert(&frame.observed_points());
     }
     let points = fused.pos.clone();
-    let mut t = Targets::new(domain.clone(), gt, f64::INFINITY).map_err(EpisodeError::Setup)?;
-    let all: Vec<u32> = (0..fused.len() as u32).collect();
-    if !all.is_empty() {
-        t.update(&fused, &all);
+    // Only d² < τ² matters for the counts: the searches are capped at the largest τ (a target
+    // at or beyond it is counted at no τ either way), and the reference points' own distances
+    // to the ground truth are never computed.
+    let cap = settings.taus.iter().copied().fold(0.0, f64::max);
+    let mut t = Targets::new(domain.clone(), gt, cap).map_err(EpisodeError::Setup)?;
+    if !fused.is_empty() {
+        t.settle(&fused);
     }
     let counts = t.counts(&settings.taus);
     let observable_sc = fractions(&counts, gt.len(), &settings.taus);

@@ -65,6 +65,9 @@ pub struct FusedCloud {
     /// every point's (block, voxel), and the point indices by block.
     at: Vec<(u32, u16)>,
     order: Vec<u32>,
+    /// Scratch of [`FusedCloud::insert`]: per input point, the new voxel it is the first point
+    /// of (or NONE).
+    by_first: Vec<u32>,
 }
 
 /// A voxel's sum and count of the current insertion's points, and its first point.
@@ -104,6 +107,7 @@ impl FusedCloud {
             latest: Vec::new(),
             at: Vec::new(),
             order: Vec::new(),
+            by_first: Vec::new(),
         }
     }
 
@@ -269,8 +273,21 @@ impl FusedCloud {
                 }
             }
         }
-        // New slots in the order of their first point (as one pass in input order would).
-        fresh.sort_unstable_by_key(|f| f.0);
+        // New slots in the order of their first point (as one pass in input order would): each
+        // point is the first of at most one voxel, so the fresh voxels are placed by their first
+        // point's index and read back in input order (no sort).
+        if fresh.len() > 1 {
+            let mut by_first = std::mem::take(&mut self.by_first);
+            by_first.clear();
+            by_first.resize(points.len(), NONE);
+            for (j, f) in fresh.iter().enumerate() {
+                by_first[f.0 as usize] = j as u32;
+            }
+            let mut sorted = Vec::with_capacity(fresh.len());
+            sorted.extend(by_first.iter().filter(|&&j| j != NONE).map(|&j| fresh[j as usize]));
+            fresh = sorted;
+            self.by_first = by_first;
+        }
         for &(i, t, li, c) in &fresh {
             let s = self.pos.len() as u32;
             let blk = &mut self.blocks[t as usize];
@@ -337,10 +354,23 @@ impl FusedCloud {
 
     /// The slots created or moved by the insertions after insertion `epoch` (0: every slot), in
     /// the spatial order of [`FusionDelta::changed`] (block, then voxel).
+    ///
+    /// Read off the blocks in domain order and each block's voxels in local order (a voxel
+    /// holds at most one slot), instead of sorting the slots by that key: at a first checkpoint
+    /// every slot changed, and the sort's random reads of the slots' blocks and keys cost more
+    /// than a pass over the blocks' voxel tables.
     pub fn changed_since(&self, epoch: u32) -> Vec<u32> {
-        let mut v: Vec<u32> = (0..self.len() as u32).filter(|&s| self.stamp[s as usize] > epoch).collect();
-        let (block, key) = (&self.block, &self.key);
-        v.sort_unstable_by_key(|&s| (block[s as usize], local_index(key[s as usize]) as u32, s));
+        let mut order: Vec<(u32, u32)> =
+            (0..self.blocks.len() as u32).map(|t| (self.table_index(t), t)).collect();
+        order.sort_unstable();
+        let mut v = Vec::new();
+        for &(_, t) in &order {
+            for &s in self.blocks[t as usize].cells.iter() {
+                if s != NONE && self.stamp[s as usize] > epoch {
+                    v.push(s);
+                }
+            }
+        }
         v
     }
 
@@ -509,6 +539,118 @@ mod tests {
         // Out of domain points are counted, not fused.
         assert_eq!(f.insert(&[[5.0, 0.0, 0.0]]).dropped, 1);
         assert_eq!(f.len(), 2);
+    }
+
+    /// The fusion rule written as one plain pass in input order (a map from voxel to slot):
+    /// per insertion, each voxel's points summed in input order; a new voxel becomes the next
+    /// slot, at its first point's turn, with centroid sum / n; a voxel seen before becomes
+    /// (centroid + sum) / (n + 1).
+    struct PlainFusion {
+        slot_of: std::collections::HashMap<[i32; 3], usize>,
+        pos: Vec<[f64; 3]>,
+    }
+
+    impl PlainFusion {
+        /// Returns the slots created or moved (as a set) and how many are new.
+        fn insert(&mut self, d: &Domain, points: &[[f64; 3]]) -> (Vec<u32>, usize) {
+            let mut sums: std::collections::HashMap<[i32; 3], ([f64; 3], usize)> = Default::default();
+            let mut first_seen: Vec<[i32; 3]> = Vec::new();
+            for &p in points {
+                let k = d.key(p);
+                if d.block_index(block_of(k)).is_none() {
+                    continue;
+                }
+                let e = sums.entry(k).or_insert_with(|| {
+                    first_seen.push(k);
+                    ([0.0; 3], 0)
+                });
+                for (s, x) in e.0.iter_mut().zip(p) {
+                    *s += x;
+                }
+                e.1 += 1;
+            }
+            let mut changed = Vec::new();
+            let mut new = 0;
+            for k in first_seen {
+                let (sum, n) = sums[&k];
+                let n = n as f64;
+                match self.slot_of.get(&k) {
+                    Some(&s) => {
+                        let c = self.pos[s];
+                        self.pos[s] = std::array::from_fn(|a| (c[a] + sum[a]) / (n + 1.0));
+                        changed.push(s as u32);
+                    }
+                    None => {
+                        self.slot_of.insert(k, self.pos.len());
+                        changed.push(self.pos.len() as u32);
+                        self.pos.push(std::array::from_fn(|a| sum[a] / n));
+                        new += 1;
+                    }
+                }
+            }
+            changed.sort_unstable();
+            (changed, new)
+        }
+    }
+
+    #[test]
+    fn insertions_equal_a_plain_pass_in_input_order() {
+        // Slot order (new voxels in the order of their first point), positions bit for bit and
+        // what each insertion changed, over insertions that revisit voxels, span blocks and
+        // drop points outside the domain.
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        let d = Domain::covering(0.005, [-0.2; 3], [0.2; 3], 0.0);
+        let mut f = FusedCloud::new(d.clone());
+        let mut plain = PlainFusion { slot_of: Default::default(), pos: Vec::new() };
+        for step in 0..8 {
+            // Centres close together, so that every insertion revisits voxels of the earlier ones.
+            let c: [f64; 3] = std::array::from_fn(|_| rng.gen_range(-0.03..0.03));
+            let r = if step % 2 == 0 { 0.03 } else { 0.08 };
+            let pts: Vec<[f64; 3]> = (0..6000)
+                .map(|i| {
+                    if i % 997 == 0 {
+                        [0.7, 0.0, 0.0]
+                    } else {
+                        std::array::from_fn(|a| c[a] + rng.gen_range(-r..r))
+                    }
+                })
+                .collect();
+            let delta = f.insert(&pts);
+            let (want_changed, want_new) = plain.insert(&d, &pts);
+            let bits = |v: &[[f64; 3]]| -> Vec<[u64; 3]> { v.iter().map(|p| p.map(f64::to_bits)).collect() };
+            assert_eq!(bits(&f.pos), bits(&plain.pos), "step {step}: positions in slot order");
+            let mut got = delta.changed.clone();
+            got.sort_unstable();
+            assert_eq!(got, want_changed, "step {step}: changed slots");
+            assert_eq!(delta.new_slots, want_new, "step {step}");
+            assert!(
+                want_new > 0 && (step == 0 || want_changed.len() > want_new),
+                "step {step}: new and moved voxels"
+            );
+        }
+    }
+
+    #[test]
+    fn changed_since_lists_the_changed_slots_by_block_and_voxel() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(8);
+        let mut f = FusedCloud::new(domain());
+        // Insertions that revisit some voxels and add others, over several blocks.
+        for _ in 0..6 {
+            let c: [f64; 3] = std::array::from_fn(|_| rng.gen_range(-0.15..0.15));
+            let pts: Vec<[f64; 3]> =
+                (0..3000).map(|_| std::array::from_fn(|a| c[a] + rng.gen_range(-0.06..0.06))).collect();
+            f.insert(&pts);
+        }
+        for epoch in 0..=f.epoch() {
+            // The definition: every slot stamped after `epoch`, sorted by (domain block, local
+            // index of its voxel).
+            let mut want: Vec<u32> = (0..f.len() as u32).filter(|&s| f.stamp[s as usize] > epoch).collect();
+            want.sort_by_key(|&s| (f.block[s as usize], local_index(f.key[s as usize])));
+            let got = f.changed_since(epoch);
+            assert_eq!(got, want, "epoch {epoch}");
+            assert_eq!(got.is_empty(), epoch == f.epoch());
+        }
+        assert_eq!(f.changed_since(0).len(), f.len());
     }
 
     #[test]

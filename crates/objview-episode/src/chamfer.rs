@@ -36,7 +36,7 @@
 use crate::fusion::FusedCloud;
 use crate::grid::{
     block_of, dist2, keyed_points, local_index, lower_best_over, nearest_in, nearest_in_block, runs_in_box,
-    Aabb, BlockSearch, Bucketed, ChangedBlocks, Domain, SuperGrid, BLOCK_CELLS, NONE,
+    Aabb, BlockSearch, Bucketed, ChangedBlocks, Domain, SuperGrid, BLOCK_CELLS, BLOCK_SHIFT, NONE,
 };
 use rayon::prelude::*;
 
@@ -707,12 +707,14 @@ mod tests {
         // Sparse points (mostly one per voxel) and dense ones around the targets (many per
         // voxel, as a fused view).
         let sparse = patch(&mut rng, 800);
-        let dense: Vec<[f64; 3]> = (0..20_000)
+        let mut dense: Vec<[f64; 3]> = (0..20_000)
             .map(|_| {
                 let p = tp[rng.gen_range(0..tp.len())];
                 std::array::from_fn(|a| p[a] + rng.gen_range(-0.02..0.02))
             })
             .collect();
+        // And points outside the targets' domain, near it and far from it.
+        dense.extend([[3.0, 0.0, 0.0], [-0.7, 0.1, 0.0], [0.0, 0.0, -1e6], [0.2, -0.69, 0.3]]);
         for (n, pts) in [("sparse", &sparse), ("dense", &dense)] {
             for tau in [0.004, 0.01, 0.023] {
                 let mut bits = vec![0u64; t.len().div_ceil(64)];
@@ -727,6 +729,37 @@ mod tests {
                 assert!(marked > 0 && (marked < t.len() || tau > 0.02), "n {n} tau {tau}: {marked}");
             }
         }
+    }
+
+    #[test]
+    fn mark_within_sees_points_just_outside_the_domain() {
+        // Targets on the domain's faces; points outside it, within τ of them or not.
+        let domain = Domain::covering(0.005, [-0.1; 3], [0.1; 3], 0.0);
+        let e = 0.005 * (1 << BLOCK_SHIFT) as f64;
+        let lo: [f64; 3] = std::array::from_fn(|a| domain.lo[a] as f64 * e);
+        let hi: [f64; 3] = std::array::from_fn(|a| (domain.lo[a] + domain.dims[a]) as f64 * e);
+        let tp = vec![
+            [hi[0] - 1e-4, 0.0, 0.0],
+            [lo[0] + 1e-4, 0.0, 0.0],
+            [0.0, hi[1] - 1e-4, 0.0],
+            [0.0, 0.0, lo[2]],
+        ];
+        let t = Targets::new(domain, &tp, 0.01).unwrap();
+        let tau = 0.012;
+        let pts = [
+            [hi[0] + 0.0115, 0.0, 0.0],  // 0.0116 from the first target: marked
+            [lo[0] - 0.0125, 0.0, 0.0],  // 0.0126 from the second: not marked
+            [0.0, hi[1] + 0.006, 0.001], // marked
+            [0.0, 0.003, lo[2] - 0.011], // marked
+            [40.0, 0.0, 0.0],
+        ];
+        let mut bits = vec![0u64; 1];
+        t.mark_within(&pts, tau, &mut bits);
+        for (i, &p) in t.points().iter().enumerate() {
+            let want = pts.iter().any(|&q| dist2(p, q) < tau * tau);
+            assert_eq!(bits[0] >> i & 1 == 1, want, "target {i} at {p:?}");
+        }
+        assert_eq!(bits[0].count_ones(), 3);
     }
 
     #[test]
@@ -775,9 +808,48 @@ impl Targets {
         // exceeds τ².
         let m = tau * (1.0 + 1e-9) + 1e-12;
         let group_of = |k: [i32; 3]| k.map(|x| x >> MARK_GROUP_SHIFT);
-        let mut keyed: Vec<([i32; 3], u32)> =
-            points.iter().enumerate().map(|(j, &q)| (group_of(self.ix.domain.key(q)), j as u32)).collect();
-        keyed.sort_unstable();
+        // The points by group, each group's in input order. A point whose voxel lies more than
+        // r + 1 voxels outside the targets' domain along an axis is more than τ + h from every
+        // target and is left out; the others' groups lie in a small box, so a group and a
+        // point index pack into one integer whose order is (group, lexicographic; index) and
+        // whose sort is several times cheaper than one of (key, index) tuples.
+        let d = &self.ix.domain;
+        let b = 1 << BLOCK_SHIFT;
+        let kmin: [i32; 3] = std::array::from_fn(|a| d.lo[a] * b - r - 1);
+        let kmax: [i32; 3] = std::array::from_fn(|a| (d.lo[a] + d.dims[a]) * b + r);
+        let (gmin, gmax) = (group_of(kmin), group_of(kmax));
+        let span: [u64; 3] = std::array::from_fn(|a| (gmax[a] - gmin[a] + 1) as u64);
+        const INDEX_BITS: u32 = 20;
+        let fits = points.len() < 1 << INDEX_BITS
+            && span[0].checked_mul(span[1]).and_then(|x| x.checked_mul(span[2])).is_some_and(|x| x < 1 << 40);
+        let mut keyed: Vec<([i32; 3], u32)> = Vec::with_capacity(points.len());
+        if fits {
+            let mut packed: Vec<u64> = points
+                .iter()
+                .enumerate()
+                .filter_map(|(j, &q)| {
+                    let k = d.key(q);
+                    if (0..3).any(|a| k[a] < kmin[a] || k[a] > kmax[a]) {
+                        return None;
+                    }
+                    let g = group_of(k);
+                    let rel: [u64; 3] = std::array::from_fn(|a| (g[a] - gmin[a]) as u64);
+                    Some((((rel[0] * span[1] + rel[1]) * span[2] + rel[2]) << INDEX_BITS) | j as u64)
+                })
+                .collect();
+            packed.sort_unstable();
+            keyed.extend(packed.iter().map(|&x| {
+                let mut l = x >> INDEX_BITS;
+                let gz = (l % span[2]) as i32;
+                l /= span[2];
+                let gy = (l % span[1]) as i32;
+                let gx = (l / span[1]) as i32;
+                ([gx + gmin[0], gy + gmin[1], gz + gmin[2]], (x & ((1 << INDEX_BITS) - 1)) as u32)
+            }));
+        } else {
+            keyed.extend(points.iter().enumerate().map(|(j, &q)| (group_of(d.key(q)), j as u32)));
+            keyed.sort_unstable();
+        }
         let mut group: Vec<[f64; 3]> = Vec::new();
         for run in keyed.chunk_by(|a, b| a.0 == b.0) {
             group.clear();

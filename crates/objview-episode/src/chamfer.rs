@@ -35,8 +35,9 @@
 
 use crate::fusion::FusedCloud;
 use crate::grid::{
-    block_of, dist2, keyed_points, local_index, lower_best_over, nearest_in, nearest_in_block, runs_in_box,
-    Aabb, BlockSearch, Bucketed, ChangedBlocks, Domain, SuperGrid, BLOCK_CELLS, BLOCK_SHIFT, NONE,
+    block_of, dist2, key_runs, keyed_points, local_index, lower_best_over, nearest_in, nearest_in_block,
+    runs_in_box, Aabb, BlockSearch, Bucketed, ChangedBlocks, Domain, SuperGrid, BLOCK_CELLS, BLOCK_SHIFT,
+    NONE,
 };
 use rayon::prelude::*;
 
@@ -763,6 +764,29 @@ mod tests {
     }
 
     #[test]
+    fn mark_within_with_a_huge_tau_marks_what_brute_force_marks() {
+        // τ of 2·10^7 voxels (too many possible groups to number: each point walks on its
+        // own) and of 2^40 voxels (r capped): points far outside the domain, some within τ of
+        // part of the targets (a nontrivial marking), one beyond τ of all of them.
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
+        let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.0);
+        let tp: Vec<[f64; 3]> = (0..3000).map(|_| [0; 3].map(|_: i32| rng.gen_range(-0.5..0.5))).collect();
+        let t = Targets::new(domain, &tp, f64::INFINITY).unwrap();
+        for tau in [1e5, 0.005 * (1u64 << 40) as f64] {
+            let pts = [[tau + 0.1, 0.0, 0.0], [0.0, -tau - 0.05, 0.02], [0.0, 0.0, 4.0 * tau]];
+            let mut bits = vec![0u64; t.len().div_ceil(64)];
+            t.mark_within(&pts, tau, &mut bits);
+            let mut marked = 0;
+            for (i, &p) in t.points().iter().enumerate() {
+                let want = pts.iter().any(|&q| dist2(p, q) < tau * tau);
+                assert_eq!(bits[i / 64] >> (i % 64) & 1 == 1, want, "tau {tau} target {i}");
+                marked += want as usize;
+            }
+            assert!(marked > 0 && marked < t.len(), "tau {tau}: {marked} of {}", t.len());
+        }
+    }
+
+    #[test]
     fn fractions_and_mean() {
         let domain = Domain::covering(0.005, [-1.0; 3], [1.0; 3], 0.05);
         let tp = vec![[0.0, 0.0, 0.0], [0.015, 0.0, 0.0], [0.5, 0.0, 0.0]];
@@ -800,66 +824,45 @@ impl Targets {
     /// one walk per group instead of one per point and no test of a target already marked.
     pub fn mark_within(&self, points: &[[f64; 3]], tau: f64, bits: &mut [u64]) {
         let t2 = tau * tau;
-        let r = (tau / self.ix.domain.h).ceil() as i32;
+        // Voxel arithmetic in i64, with r capped where every 32-bit key is within r of the
+        // domain (any τ, however large, walks at most the domain's voxels).
+        let r = (tau / self.ix.domain.h).ceil().min((1u64 << 34) as f64) as i64;
         // The box test's margin: a target outside the box grown by `m` differs from every
         // point by more than τ along some axis even after the rounding of `lo − m` (the
         // margin's 1e-9·τ + 1e-12 exceeds an ulp of any coordinate of a normalized scene),
         // so its computed d² (a sum of non-negative rounded squares, at least that axis's)
         // exceeds τ².
         let m = tau * (1.0 + 1e-9) + 1e-12;
-        let group_of = |k: [i32; 3]| k.map(|x| x >> MARK_GROUP_SHIFT);
-        // The points by group, each group's in input order. A point whose voxel lies more than
-        // r + 1 voxels outside the targets' domain along an axis is more than τ + h from every
-        // target and is left out; the others' groups lie in a small box, so a group and a
-        // point index pack into one integer whose order is (group, lexicographic; index) and
-        // whose sort is several times cheaper than one of (key, index) tuples.
         let d = &self.ix.domain;
-        let b = 1 << BLOCK_SHIFT;
-        let kmin: [i32; 3] = std::array::from_fn(|a| d.lo[a] * b - r - 1);
-        let kmax: [i32; 3] = std::array::from_fn(|a| (d.lo[a] + d.dims[a]) * b + r);
+        let b = 1i64 << BLOCK_SHIFT;
+        // The targets' voxels lie in `dlo..=dhi`. A point whose voxel lies more than r + 1
+        // voxels outside them along an axis is more than τ + h from every target and is left
+        // out.
+        let dlo: [i64; 3] = std::array::from_fn(|a| d.lo[a] as i64 * b);
+        let dhi: [i64; 3] = std::array::from_fn(|a| (d.lo[a] + d.dims[a]) as i64 * b - 1);
+        let (kmin, kmax): ([i64; 3], [i64; 3]) =
+            (std::array::from_fn(|a| dlo[a] - r - 1), std::array::from_fn(|a| dhi[a] + r + 1));
+        let group_of = |k: [i64; 3]| k.map(|x| x >> MARK_GROUP_SHIFT);
         let (gmin, gmax) = (group_of(kmin), group_of(kmax));
         let span: [u64; 3] = std::array::from_fn(|a| (gmax[a] - gmin[a] + 1) as u64);
-        const INDEX_BITS: u32 = 20;
-        let fits = points.len() < 1 << INDEX_BITS
-            && span[0].checked_mul(span[1]).and_then(|x| x.checked_mul(span[2])).is_some_and(|x| x < 1 << 40);
-        let mut keyed: Vec<([i32; 3], u32)> = Vec::with_capacity(points.len());
-        if fits {
-            let mut packed: Vec<u64> = points
-                .iter()
-                .enumerate()
-                .filter_map(|(j, &q)| {
-                    let k = d.key(q);
-                    if (0..3).any(|a| k[a] < kmin[a] || k[a] > kmax[a]) {
-                        return None;
-                    }
-                    let g = group_of(k);
-                    let rel: [u64; 3] = std::array::from_fn(|a| (g[a] - gmin[a]) as u64);
-                    Some((((rel[0] * span[1] + rel[1]) * span[2] + rel[2]) << INDEX_BITS) | j as u64)
-                })
-                .collect();
-            packed.sort_unstable();
-            keyed.extend(packed.iter().map(|&x| {
-                let mut l = x >> INDEX_BITS;
-                let gz = (l % span[2]) as i32;
-                l /= span[2];
-                let gy = (l % span[1]) as i32;
-                let gx = (l / span[1]) as i32;
-                ([gx + gmin[0], gy + gmin[1], gz + gmin[2]], (x & ((1 << INDEX_BITS) - 1)) as u32)
-            }));
-        } else {
-            keyed.extend(points.iter().enumerate().map(|(j, &q)| (group_of(d.key(q)), j as u32)));
-            keyed.sort_unstable();
-        }
+        let kept = |j: usize| {
+            let k = d.key(points[j]).map(i64::from);
+            (0..3).all(|a| k[a] >= kmin[a] && k[a] <= kmax[a]).then_some(group_of(k))
+        };
+        // Marks the targets within τ of the points `members` (indices into `points`), all in
+        // group `g`: the voxels within r of the group's cube, clipped to the domain.
         let mut group: Vec<[f64; 3]> = Vec::new();
-        for run in keyed.chunk_by(|a, b| a.0 == b.0) {
+        let mut visit = |g: [i64; 3], members: &mut dyn Iterator<Item = usize>| {
             group.clear();
-            group.extend(run.iter().map(|&(_, j)| points[j as usize]));
+            group.extend(members.map(|j| points[j]));
             let mut bx = Aabb::EMPTY;
             group.iter().for_each(|&q| bx.grow(q));
             let (lo, hi) = (bx.lo.map(|x| x - m), bx.hi.map(|x| x + m));
-            let g = run[0].0;
-            let first = g.map(|x| (x << MARK_GROUP_SHIFT) - r);
-            let last = g.map(|x| (x << MARK_GROUP_SHIFT) + (1 << MARK_GROUP_SHIFT) - 1 + r);
+            let first: [i32; 3] =
+                std::array::from_fn(|a| ((g[a] << MARK_GROUP_SHIFT) - r).max(dlo[a]) as i32);
+            let last: [i32; 3] = std::array::from_fn(|a| {
+                ((g[a] << MARK_GROUP_SHIFT) + (1 << MARK_GROUP_SHIFT) - 1 + r).min(dhi[a]) as i32
+            });
             self.ix.for_runs_in_box(first, last, |_, a, b| {
                 for i in a..b {
                     let (w, bit) = (i as usize / 64, 1u64 << (i % 64));
@@ -872,6 +875,34 @@ impl Targets {
                     }
                 }
             });
+        };
+        match span[0].checked_mul(span[1]).and_then(|x| x.checked_mul(span[2])) {
+            // Groups numbered within the box of possible groups (lexicographic), visited once.
+            Some(bound) => {
+                let grouped = key_runs(points.len(), bound, |j| {
+                    kept(j).map(|g| {
+                        let rel: [u64; 3] = std::array::from_fn(|a| (g[a] - gmin[a]) as u64);
+                        (rel[0] * span[1] + rel[1]) * span[2] + rel[2]
+                    })
+                });
+                for &(key, a, b) in &grouped.runs {
+                    let g = [
+                        (key / (span[1] * span[2])) as i64 + gmin[0],
+                        (key / span[2] % span[1]) as i64 + gmin[1],
+                        (key % span[2]) as i64 + gmin[2],
+                    ];
+                    visit(g, &mut grouped.order[a..b].iter().map(|&j| j as usize));
+                }
+            }
+            // Too many possible groups to number (only for a τ of millions of voxels): each
+            // point walks its own neighbourhood, which marks the same targets.
+            None => {
+                for j in 0..points.len() {
+                    if let Some(g) = kept(j) {
+                        visit(g, &mut std::iter::once(j));
+                    }
+                }
+            }
         }
     }
 }

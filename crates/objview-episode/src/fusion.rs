@@ -9,7 +9,7 @@
 //! only around them.
 
 use crate::grid::{
-    block_of, local_index, lower_best_over, nearest_in, runs_in_box, Bucketed, Domain, SuperGrid,
+    block_of, key_runs, local_index, lower_best_over, nearest_in, runs_in_box, Bucketed, Domain, SuperGrid,
     SuperHandle, BLOCK_CELLS, NONE,
 };
 
@@ -65,8 +65,10 @@ pub struct FusedCloud {
     /// every point's (block, voxel), and the point indices by block.
     at: Vec<(u32, u16)>,
     order: Vec<u32>,
-    /// Scratch of [`FusedCloud::insert`]: per input point, the new voxel it is the first point
-    /// of (or NONE).
+    /// Scratch of [`FusedCloud::insert`]: the voxels seen for the first time, as (first point,
+    /// block, local index, centroid), and per input point the one it is the first point of (or
+    /// NONE).
+    fresh: Vec<(u32, u32, u16, [f64; 3])>,
     by_first: Vec<u32>,
 }
 
@@ -107,6 +109,7 @@ impl FusedCloud {
             latest: Vec::new(),
             at: Vec::new(),
             order: Vec::new(),
+            fresh: Vec::new(),
             by_first: Vec::new(),
         }
     }
@@ -228,7 +231,8 @@ impl FusedCloud {
         // Pass 2: block by block, sums per voxel (in the scratch), then the new centroids of
         // the block's voxels seen before; voxels seen for the first time are kept aside with
         // their first point and centroid.
-        let mut fresh: Vec<(u32, u32, u16, [f64; 3])> = Vec::new();
+        let mut fresh = std::mem::take(&mut self.fresh);
+        fresh.clear();
         let mut start = 0usize;
         for &t in &touched {
             let blk = &mut self.blocks[t as usize];
@@ -276,19 +280,19 @@ impl FusedCloud {
         // New slots in the order of their first point (as one pass in input order would): each
         // point is the first of at most one voxel, so the fresh voxels are placed by their first
         // point's index and read back in input order (no sort).
+        let mut by_first = std::mem::take(&mut self.by_first);
+        by_first.clear();
         if fresh.len() > 1 {
-            let mut by_first = std::mem::take(&mut self.by_first);
-            by_first.clear();
             by_first.resize(points.len(), NONE);
             for (j, f) in fresh.iter().enumerate() {
                 by_first[f.0 as usize] = j as u32;
             }
-            let mut sorted = Vec::with_capacity(fresh.len());
-            sorted.extend(by_first.iter().filter(|&&j| j != NONE).map(|&j| fresh[j as usize]));
-            fresh = sorted;
-            self.by_first = by_first;
+            by_first.retain(|&j| j != NONE);
+        } else {
+            by_first.extend(0..fresh.len() as u32);
         }
-        for &(i, t, li, c) in &fresh {
+        for &j in &by_first {
+            let (i, t, li, c) = fresh[j as usize];
             let s = self.pos.len() as u32;
             let blk = &mut self.blocks[t as usize];
             blk.cells[li as usize] = s;
@@ -303,7 +307,9 @@ impl FusedCloud {
             self.block.push(self.domain.block_index(blk.key).expect("an allocated block") as u32);
             self.stamp.push(epoch);
         }
+        self.by_first = by_first;
         delta.new_slots = fresh.len();
+        self.fresh = fresh;
         // Spatial order (block, then voxel) for cache-friendly metric updates: the touched
         // blocks by domain index, and each one's changed voxels by local index.
         let mut by_domain = std::mem::take(&mut self.latest);
@@ -438,43 +444,21 @@ impl Bucketed for FusedCloud {
 /// without its blocks, tables and slot bookkeeping. For callers that need one view's fused cloud
 /// as a point set (the oracle's per-candidate coverage).
 ///
-/// The points are sorted by one packed integer, (block index · 512 + local index) · 2²⁰ + point
-/// index, which orders them by voxel and each voxel's points in input order (a sort of plain
-/// `u64`s, several times cheaper than one of (key, index) tuples); beyond 2²⁰ points the index
-/// goes in a second field.
+/// The points are grouped by [`key_runs`] on the key block index · 512 + local index, which
+/// orders the voxels by block and voxel and each voxel's points in input order.
 pub fn frame_centroids(domain: &Domain, points: &[[f64; 3]]) -> Vec<[f64; 3]> {
-    const INDEX_BITS: u32 = 20;
-    let voxel = |p: [f64; 3]| {
-        let k = domain.key(p);
+    // Each voxel's points in input order, voxels by (block, local index).
+    let voxel = |i: usize| {
+        let k = domain.key(points[i]);
         domain.block_index(block_of(k)).map(|b| ((b as u64) << 9) | local_index(k) as u64)
     };
-    // Each voxel's run of point indices, in input order.
-    let mut runs: Vec<(usize, usize)> = Vec::new();
-    let mut order: Vec<u32> = Vec::with_capacity(points.len());
-    if points.len() < 1 << INDEX_BITS {
-        let mut keyed: Vec<u64> = points
-            .iter()
-            .enumerate()
-            .filter_map(|(i, &p)| voxel(p).map(|v| (v << INDEX_BITS) | i as u64))
-            .collect();
-        keyed.sort_unstable();
-        for run in keyed.chunk_by(|a, b| a >> INDEX_BITS == b >> INDEX_BITS) {
-            runs.push((order.len(), order.len() + run.len()));
-            order.extend(run.iter().map(|&x| (x & ((1 << INDEX_BITS) - 1)) as u32));
-        }
-    } else {
-        let mut keyed: Vec<(u64, u32)> =
-            points.iter().enumerate().filter_map(|(i, &p)| voxel(p).map(|v| (v, i as u32))).collect();
-        keyed.sort_unstable();
-        for run in keyed.chunk_by(|a, b| a.0 == b.0) {
-            runs.push((order.len(), order.len() + run.len()));
-            order.extend(run.iter().map(|&(_, i)| i));
-        }
-    }
-    runs.iter()
-        .map(|&(a, b)| {
+    let grouped = key_runs(points.len(), (domain.num_blocks() as u64) << 9, voxel);
+    grouped
+        .runs
+        .iter()
+        .map(|&(_, a, b)| {
             let mut s = [0.0f64; 3];
-            for &i in &order[a..b] {
+            for &i in &grouped.order[a..b] {
                 let p = points[i as usize];
                 s[0] += p[0];
                 s[1] += p[1];

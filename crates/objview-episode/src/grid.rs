@@ -762,6 +762,45 @@ fn gather_candidates<S: Bucketed>(
     cand.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
 }
 
+/// Item indices grouped by an integer key, for passes that handle each group once: see
+/// [`key_runs`].
+#[derive(Debug, Default, PartialEq)]
+pub(crate) struct KeyRuns {
+    /// `(key, start, end)` by ascending key: `order[start..end]` are the items with that key,
+    /// in ascending index order.
+    pub runs: Vec<(u64, usize, usize)>,
+    pub order: Vec<u32>,
+}
+
+/// The items `0..n` whose `key` is `Some`, ordered by (key, index) and split into runs of equal
+/// key. Every key must be below `key_bound`. With fewer than 2^20 items and keys below 2^44,
+/// key and index pack into one `u64` per item, whose sort is several times cheaper than one of
+/// (key, index) pairs; otherwise the pairs are sorted. `n` must fit in a `u32`.
+pub(crate) fn key_runs(n: usize, key_bound: u64, key: impl Fn(usize) -> Option<u64>) -> KeyRuns {
+    const INDEX_BITS: u32 = 20;
+    assert!(u32::try_from(n).is_ok(), "key_runs: {n} items do not fit 32-bit indices");
+    let mut out = KeyRuns { runs: Vec::new(), order: Vec::with_capacity(n) };
+    if n < 1 << INDEX_BITS && key_bound <= 1 << (64 - INDEX_BITS) {
+        let mut packed: Vec<u64> =
+            (0..n).filter_map(|i| key(i).map(|k| (k << INDEX_BITS) | i as u64)).collect();
+        packed.sort_unstable();
+        for run in packed.chunk_by(|a, b| a >> INDEX_BITS == b >> INDEX_BITS) {
+            let start = out.order.len();
+            out.order.extend(run.iter().map(|&x| (x & ((1 << INDEX_BITS) - 1)) as u32));
+            out.runs.push((run[0] >> INDEX_BITS, start, out.order.len()));
+        }
+    } else {
+        let mut pairs: Vec<(u64, u32)> = (0..n).filter_map(|i| key(i).map(|k| (k, i as u32))).collect();
+        pairs.sort_unstable();
+        for run in pairs.chunk_by(|a, b| a.0 == b.0) {
+            let start = out.order.len();
+            out.order.extend(run.iter().map(|&(_, i)| i));
+            out.runs.push((run[0].0, start, out.order.len()));
+        }
+    }
+    out
+}
+
 /// `(domain block index, local voxel index, input index)` of every point, sorted (by block,
 /// then voxel, then input order): the layout of the target sets. Points outside `domain` are
 /// an error naming how many.
@@ -1011,6 +1050,40 @@ impl ChangedBlocks {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn key_runs_group_by_key_then_index_on_both_sorts() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        // Keys drawn from few values (long runs), some items without a key; the same items
+        // through the packed sort (small bound) and the pair sort (a bound above 2^44, and more
+        // than 2^20 items), against a map from key to indices filled in index order.
+        for (n, spread, big) in [
+            (0usize, 1u64, false),
+            (1, 1, false),
+            (3000, 40, false),
+            (3000, 40, true),
+            (5000, 1 << 43, false),
+            ((1 << 20) + 5, 3000, false),
+        ] {
+            let offset = if big { 1u64 << 50 } else { 0 };
+            let keys: Vec<Option<u64>> =
+                (0..n).map(|_| rng.gen_bool(0.9).then(|| offset + rng.gen_range(0..spread))).collect();
+            let bound = offset + spread;
+            let got = key_runs(n, bound, |i| keys[i]);
+            let mut want: std::collections::BTreeMap<u64, Vec<u32>> = Default::default();
+            for (i, k) in keys.iter().enumerate() {
+                if let Some(k) = k {
+                    want.entry(*k).or_default().push(i as u32);
+                }
+            }
+            assert_eq!(got.runs.len(), want.len(), "n {n}");
+            for (&(k, a, b), (wk, wi)) in got.runs.iter().zip(&want) {
+                assert_eq!((k, &got.order[a..b]), (*wk, &wi[..]), "n {n} key {k}");
+            }
+            assert_eq!(got.order.len(), keys.iter().flatten().count());
+        }
+    }
 
     #[test]
     fn keys_and_blocks_floor() {

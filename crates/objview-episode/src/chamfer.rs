@@ -845,8 +845,10 @@ impl Targets {
         let group_of = |k: [i64; 3]| k.map(|x| x >> MARK_GROUP_SHIFT);
         let (gmin, gmax) = (group_of(kmin), group_of(kmax));
         let span: [u64; 3] = std::array::from_fn(|a| (gmax[a] - gmin[a] + 1) as u64);
+        let mut keys = Vec::new();
+        d.keys_into(points, &mut keys);
         let kept = |j: usize| {
-            let k = d.key(points[j]).map(i64::from);
+            let k = keys[j].map(i64::from);
             (0..3).all(|a| k[a] >= kmin[a] && k[a] <= kmax[a]).then_some(group_of(k))
         };
         // Marks the targets within τ of the points `members` (indices into `points`), all in

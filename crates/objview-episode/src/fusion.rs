@@ -65,6 +65,8 @@ pub struct FusedCloud {
     /// every point's (block, voxel), and the point indices by block.
     at: Vec<(u32, u16)>,
     order: Vec<u32>,
+    /// Scratch of [`FusedCloud::insert`]: every point's fine key.
+    keys: Vec<[i32; 3]>,
     /// Scratch of [`FusedCloud::insert`]: the voxels seen for the first time, as (first point,
     /// block, local index, centroid), and per input point the one it is the first point of (or
     /// NONE).
@@ -109,6 +111,7 @@ impl FusedCloud {
             latest: Vec::new(),
             at: Vec::new(),
             order: Vec::new(),
+            keys: Vec::new(),
             fresh: Vec::new(),
             by_first: Vec::new(),
         }
@@ -174,8 +177,9 @@ impl FusedCloud {
         at.clear();
         let mut touched: Vec<u32> = Vec::new();
         let mut last: (usize, u32) = (usize::MAX, NONE);
-        for &p in points {
-            let k = self.domain.key(p);
+        let mut keys = std::mem::take(&mut self.keys);
+        self.domain.keys_into(points, &mut keys);
+        for &k in &keys {
             let Some(b) = self.domain.block_index(block_of(k)) else {
                 delta.dropped += 1;
                 at.push((NONE, 0));
@@ -277,19 +281,21 @@ impl FusedCloud {
                 }
             }
         }
-        // New slots in the order of their first point (as one pass in input order would): each
-        // point is the first of at most one voxel, so the fresh voxels are placed by their first
-        // point's index and read back in input order (no sort).
+        // New slots in the order of their first point (as one pass in input order would). Each
+        // point is the first of at most one voxel: many fresh voxels (a first view) are placed
+        // by their first point's index and read back in input order; a few (later views, where
+        // that pass would clear and scan an entry per point) are sorted by it.
         let mut by_first = std::mem::take(&mut self.by_first);
         by_first.clear();
-        if fresh.len() > 1 {
+        if fresh.len() * FRESH_SORT_SHARE < points.len() {
+            by_first.extend(0..fresh.len() as u32);
+            by_first.sort_unstable_by_key(|&j| fresh[j as usize].0);
+        } else {
             by_first.resize(points.len(), NONE);
             for (j, f) in fresh.iter().enumerate() {
                 by_first[f.0 as usize] = j as u32;
             }
             by_first.retain(|&j| j != NONE);
-        } else {
-            by_first.extend(0..fresh.len() as u32);
         }
         for &j in &by_first {
             let (i, t, li, c) = fresh[j as usize];
@@ -303,11 +309,12 @@ impl FusedCloud {
                 self.supergrid.grow(h, c);
             }
             self.pos.push(c);
-            self.key.push(self.domain.key(points[i as usize]));
+            self.key.push(keys[i as usize]);
             self.block.push(self.domain.block_index(blk.key).expect("an allocated block") as u32);
             self.stamp.push(epoch);
         }
         self.by_first = by_first;
+        self.keys = keys;
         delta.new_slots = fresh.len();
         self.fresh = fresh;
         // Spatial order (block, then voxel) for cache-friendly metric updates: the touched
@@ -437,6 +444,10 @@ impl Bucketed for FusedCloud {
     }
 }
 
+/// [`FusedCloud::insert`] sorts its new voxels by first point when they are fewer than the
+/// points / this, and places them by index otherwise.
+const FRESH_SORT_SHARE: usize = 16;
+
 /// The fused points of one frame on its own: the centroid of each voxel of `domain` that holds
 /// some of `points` (points outside the domain are dropped), by block and voxel (domain block
 /// index, then local index) — the positions a fresh [`FusedCloud`] holds after inserting
@@ -448,8 +459,10 @@ impl Bucketed for FusedCloud {
 /// orders the voxels by block and voxel and each voxel's points in input order.
 pub fn frame_centroids(domain: &Domain, points: &[[f64; 3]]) -> Vec<[f64; 3]> {
     // Each voxel's points in input order, voxels by (block, local index).
+    let mut keys = Vec::new();
+    domain.keys_into(points, &mut keys);
     let voxel = |i: usize| {
-        let k = domain.key(points[i]);
+        let k = keys[i];
         domain.block_index(block_of(k)).map(|b| ((b as u64) << 9) | local_index(k) as u64)
     };
     let grouped = key_runs(points.len(), (domain.num_blocks() as u64) << 9, voxel);
@@ -611,10 +624,12 @@ mod tests {
         let d = Domain::covering(0.005, [-0.2; 3], [0.2; 3], 0.0);
         let mut f = FusedCloud::new(d.clone());
         let mut plain = PlainFusion { slot_of: Default::default(), pos: Vec::new() };
-        for step in 0..8 {
+        // Insertions whose new voxels are placed by index, and sorted (few of them).
+        let mut paths = [0; 2];
+        for step in 0..9 {
             // Centres close together, so that every insertion revisits voxels of the earlier ones.
             let c: [f64; 3] = std::array::from_fn(|_| rng.gen_range(-0.03..0.03));
-            let r = if step % 2 == 0 { 0.03 } else { 0.08 };
+            let r = [0.03, 0.08, 0.02][step % 3];
             let pts: Vec<[f64; 3]> = (0..6000)
                 .map(|i| {
                     if i % 997 == 0 {
@@ -636,7 +651,9 @@ mod tests {
                 want_new > 0 && (step == 0 || want_changed.len() > want_new),
                 "step {step}: new and moved voxels"
             );
+            paths[(want_new * FRESH_SORT_SHARE < pts.len()) as usize] += 1;
         }
+        assert!(paths[0] > 0 && paths[1] > 0, "both orderings of new voxels: {paths:?}");
     }
 
     #[test]

@@ -68,8 +68,8 @@ pub struct FusedCloud {
     /// Scratch of [`FusedCloud::insert`]: every point's fine key.
     keys: Vec<[i32; 3]>,
     /// Scratch of [`FusedCloud::insert`]: the voxels seen for the first time, as (first point,
-    /// block, local index, centroid), and per input point the one it is the first point of (or
-    /// NONE).
+    /// block, local index, centroid), and their indices in `fresh` in the order of their first
+    /// point (the slot order; built through a per-point table when there are many).
     fresh: Vec<(u32, u32, u16, [f64; 3])>,
     by_first: Vec<u32>,
 }
@@ -455,7 +455,7 @@ const FRESH_SORT_SHARE: usize = 16;
 /// without its blocks, tables and slot bookkeeping. For callers that need one view's fused cloud
 /// as a point set (the oracle's per-candidate coverage).
 ///
-/// The points are grouped by [`key_runs`] on the key block index · 512 + local index, which
+/// The points are grouped by `grid::key_runs` on the key block index · 512 + local index, which
 /// orders the voxels by block and voxel and each voxel's points in input order.
 pub fn frame_centroids(domain: &Domain, points: &[[f64; 3]]) -> Vec<[f64; 3]> {
     // Each voxel's points in input order, voxels by (block, local index).

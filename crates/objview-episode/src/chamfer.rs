@@ -35,9 +35,9 @@
 
 use crate::fusion::FusedCloud;
 use crate::grid::{
-    block_of, dist2, key_runs, keyed_points, local_index, lower_best_over, nearest_in, nearest_in_block,
-    runs_in_box, Aabb, BlockSearch, Bucketed, ChangedBlocks, Domain, SuperGrid, BLOCK_CELLS, BLOCK_SHIFT,
-    NONE,
+    block_of, cell_of_key, dist2, key_runs, keyed_points, local_index, lower_best_over, nearest_in,
+    nearest_in_block, runs_in_box, Aabb, BlockSearch, Bucketed, ChangedBlocks, Domain, SuperGrid,
+    BLOCK_CELLS, BLOCK_SHIFT, NONE,
 };
 use rayon::prelude::*;
 
@@ -116,28 +116,27 @@ impl Targets {
         let mut table = vec![NONE; domain.num_blocks()];
         let mut cell_start: Vec<[u32; BLOCK_CELLS + 1]> = Vec::new();
         let mut supergrid = SuperGrid::new(&domain);
-        let mut pts = Vec::with_capacity(keyed.len());
-        let mut i = 0;
-        while i < keyed.len() {
-            let b = keyed[i].0;
+        let mut pts = Vec::with_capacity(keyed.order.len());
+        // The runs of one block at a time; a voxel without points starts where the next one does.
+        for block_runs in keyed.runs.chunk_by(|a, b| cell_of_key(a.0).0 == cell_of_key(b.0).0) {
+            let b = cell_of_key(block_runs[0].0).0;
+            let first = pts.len();
             let mut starts = [0u32; BLOCK_CELLS + 1];
-            let mut j = i;
-            for (c, start) in starts.iter_mut().enumerate().take(BLOCK_CELLS) {
-                *start = (i + (j - i)) as u32;
-                while j < keyed.len() && keyed[j].0 == b && keyed[j].1 as usize == c {
-                    pts.push(points[keyed[j].2]);
-                    j += 1;
-                }
+            let mut next_cell = 0;
+            for &(key, s, e) in block_runs {
+                let c = cell_of_key(key).1;
+                starts[next_cell..=c].fill(pts.len() as u32);
+                pts.extend(keyed.order[s..e].iter().map(|&i| points[i as usize]));
+                next_cell = c + 1;
             }
-            starts[BLOCK_CELLS] = j as u32;
-            table[b as usize] = cell_start.len() as u32;
+            starts[next_cell..].fill(pts.len() as u32);
+            table[b] = cell_start.len() as u32;
             cell_start.push(starts);
-            if let Some(h) = supergrid.add_block(domain.block_key(b as usize)) {
-                for &p in &pts[starts[0] as usize..j] {
+            if let Some(h) = supergrid.add_block(domain.block_key(b)) {
+                for &p in &pts[first..] {
                     supergrid.grow(h, p);
                 }
             }
-            i = j;
         }
         let n = pts.len();
         Ok(Targets {

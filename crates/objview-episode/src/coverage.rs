@@ -31,7 +31,9 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use crate::fusion::FusedCloud;
-use crate::grid::{box_box_dist2, dist2, keyed_points, local_index, Aabb, ChangedBlocks, Domain, NONE};
+use crate::grid::{
+    box_box_dist2, cell_of_key, dist2, keyed_points, local_index, Aabb, ChangedBlocks, Domain, NONE,
+};
 
 /// Safety margin (units²) of the retirement test: a voxel counts as inside the ball only with
 /// this much to spare, so that a centroid rounded an ulp outside its voxel cannot matter.
@@ -103,19 +105,14 @@ impl Coverage {
             return Err(format!("coverage radii must be 1 to 8 positive numbers, got {taus:?}"));
         }
         let keyed = keyed_points(&domain, points)?;
-        let pts: Vec<[f64; 3]> = keyed.iter().map(|&(_, _, i)| points[i]).collect();
+        let pts: Vec<[f64; 3]> = keyed.order.iter().map(|&i| points[i as usize]).collect();
         let mut blocks = Vec::new();
         let mut live = Vec::new();
-        let mut i = 0;
-        while i < keyed.len() {
-            let b = keyed[i].0;
-            let mut j = i;
-            while j < keyed.len() && keyed[j].0 == b {
-                j += 1;
-            }
-            blocks.push((domain.block_key(b as usize), i as u32, j as u32));
-            live.push((i as u32..j as u32).collect());
-            i = j;
+        for block_runs in keyed.runs.chunk_by(|a, b| cell_of_key(a.0).0 == cell_of_key(b.0).0) {
+            let b = cell_of_key(block_runs[0].0).0;
+            let (i, j) = (block_runs[0].1 as u32, block_runs[block_runs.len() - 1].2 as u32);
+            blocks.push((domain.block_key(b), i, j));
+            live.push((i..j).collect());
         }
         let n = pts.len();
         let t2: Vec<f64> = taus.iter().map(|t| t * t).collect();

@@ -811,21 +811,22 @@ pub(crate) struct KeyRuns {
 }
 
 /// The items `0..n` whose `key` is `Some`, ordered by (key, index) and split into runs of equal
-/// key. Every key must be below `key_bound`. With fewer than 2^20 items and keys below 2^44,
-/// key and index pack into one `u64` per item, whose sort is several times cheaper than one of
-/// (key, index) pairs; otherwise the pairs are sorted. `n` must fit in a `u32`.
+/// key. Every key must be below `key_bound`. When key and index fit in one `u64` together (the
+/// index in the low ⌈log₂ n⌉ bits), the packed values are sorted, several times cheaper than
+/// (key, index) pairs; otherwise the pairs are. `n` must fit in a `u32`.
 pub(crate) fn key_runs(n: usize, key_bound: u64, key: impl Fn(usize) -> Option<u64>) -> KeyRuns {
-    const INDEX_BITS: u32 = 20;
     assert!(u32::try_from(n).is_ok(), "key_runs: {n} items do not fit 32-bit indices");
+    let index_bits = (usize::BITS - n.saturating_sub(1).leading_zeros()).max(1);
     let mut out = KeyRuns { runs: Vec::new(), order: Vec::with_capacity(n) };
-    if n < 1 << INDEX_BITS && key_bound <= 1 << (64 - INDEX_BITS) {
+    if key_bound <= 1 << (64 - index_bits) {
         let mut packed: Vec<u64> =
-            (0..n).filter_map(|i| key(i).map(|k| (k << INDEX_BITS) | i as u64)).collect();
+            (0..n).filter_map(|i| key(i).map(|k| (k << index_bits) | i as u64)).collect();
         packed.sort_unstable();
-        for run in packed.chunk_by(|a, b| a >> INDEX_BITS == b >> INDEX_BITS) {
+        let index_mask = (1u64 << index_bits) - 1;
+        for run in packed.chunk_by(|a, b| a >> index_bits == b >> index_bits) {
             let start = out.order.len();
-            out.order.extend(run.iter().map(|&x| (x & ((1 << INDEX_BITS) - 1)) as u32));
-            out.runs.push((run[0] >> INDEX_BITS, start, out.order.len()));
+            out.order.extend(run.iter().map(|&x| (x & index_mask) as u32));
+            out.runs.push((run[0] >> index_bits, start, out.order.len()));
         }
     } else {
         let mut pairs: Vec<(u64, u32)> = (0..n).filter_map(|i| key(i).map(|k| (k, i as u32))).collect();
@@ -839,24 +840,29 @@ pub(crate) fn key_runs(n: usize, key_bound: u64, key: impl Fn(usize) -> Option<u
     out
 }
 
-/// `(domain block index, local voxel index, input index)` of every point, sorted (by block,
-/// then voxel, then input order): the layout of the target sets. Points outside `domain` are
-/// an error naming how many.
-pub(crate) fn keyed_points(domain: &Domain, points: &[[f64; 3]]) -> Result<Vec<(u32, u32, usize)>, String> {
-    let mut keyed: Vec<(u32, u32, usize)> = Vec::with_capacity(points.len());
-    let mut outside = 0usize;
-    for (i, &p) in points.iter().enumerate() {
-        let k = domain.key(p);
-        match domain.block_index(block_of(k)) {
-            Some(b) => keyed.push((b as u32, local_index(k) as u32, i)),
-            None => outside += 1,
-        }
-    }
+/// Every point of `points` by its fine voxel: the layout of the target sets. The runs' key is
+/// `block index · BLOCK_CELLS + local voxel index` (see [`cell_of_key`]), so the runs come by
+/// domain block, then voxel, each listing its points in input order. Points outside `domain`
+/// are an error naming how many.
+pub(crate) fn keyed_points(domain: &Domain, points: &[[f64; 3]]) -> Result<KeyRuns, String> {
+    let mut keys = Vec::new();
+    domain.keys_into(points, &mut keys);
+    let bound = (domain.num_blocks() * BLOCK_CELLS) as u64;
+    let keyed = key_runs(points.len(), bound, |i| {
+        let k = keys[i];
+        domain.block_index(block_of(k)).map(|b| (b * BLOCK_CELLS + local_index(k)) as u64)
+    });
+    let outside = points.len() - keyed.order.len();
     if outside > 0 {
         return Err(format!("{outside} target points lie outside the metric domain"));
     }
-    keyed.sort_unstable();
     Ok(keyed)
+}
+
+/// `(domain block index, local voxel index)` of a [`keyed_points`] run key.
+#[inline]
+pub(crate) fn cell_of_key(key: u64) -> (usize, usize) {
+    ((key / BLOCK_CELLS as u64) as usize, (key % BLOCK_CELLS as u64) as usize)
 }
 
 /// Calls `f` for every block key at Chebyshev distance exactly `r` from `c`.
@@ -1124,17 +1130,22 @@ mod tests {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         // Keys drawn from few values (long runs), some items without a key; the same items
-        // through the packed sort (small bound) and the pair sort (a bound above 2^44, and more
-        // than 2^20 items), against a map from key to indices filled in index order.
+        // through the packed sort (the index in the low ⌈log₂ n⌉ bits: 12 for 3000 items, 21
+        // for 2^20 + 5) and the pair sort (a key bound above 2^(64 − those bits)), against a map
+        // from key to indices filled in index order.
         for (n, spread, big) in [
             (0usize, 1u64, false),
             (1, 1, false),
+            (2, 1, false),
             (3000, 40, false),
             (3000, 40, true),
             (5000, 1 << 43, false),
+            (4096, (1 << 52) - 7, false),
+            (4097, (1 << 51) + 9, false),
             ((1 << 20) + 5, 3000, false),
+            ((1 << 20) + 5, 3000, true),
         ] {
-            let offset = if big { 1u64 << 50 } else { 0 };
+            let offset = if big { 1u64 << 60 } else { 0 };
             let keys: Vec<Option<u64>> =
                 (0..n).map(|_| rng.gen_bool(0.9).then(|| offset + rng.gen_range(0..spread))).collect();
             let bound = offset + spread;
@@ -1151,6 +1162,43 @@ mod tests {
             }
             assert_eq!(got.order.len(), keys.iter().flatten().count());
         }
+    }
+
+    #[test]
+    fn keyed_points_lists_every_point_by_block_voxel_then_index() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(23);
+        let d = Domain::covering(0.01, [-0.3; 3], [0.3; 3], 0.0);
+        // Clustered points (many share a voxel and a block), a few exactly on voxel faces.
+        let mut pts: Vec<[f64; 3]> = (0..4000)
+            .map(|_| {
+                [0; 3]
+                    .map(|_: i32| (rng.gen_range(-30..30) as f64 * 0.01 + rng.gen_range(0.0..0.02)).min(0.29))
+            })
+            .collect();
+        pts.extend([[0.0; 3], [-0.01, 0.0, 0.01], [0.0; 3]]);
+        // Against the definition: (block index, local index, input index), sorted.
+        let mut want: Vec<(usize, usize, u32)> = pts
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| {
+                let k = d.key(p);
+                (d.block_index(block_of(k)).unwrap(), local_index(k), i as u32)
+            })
+            .collect();
+        want.sort_unstable();
+        let got = keyed_points(&d, &pts).unwrap();
+        let mut flat = Vec::new();
+        for &(key, s, e) in &got.runs {
+            assert!(s < e);
+            let (b, c) = cell_of_key(key);
+            flat.extend(got.order[s..e].iter().map(|&i| (b, c, i)));
+        }
+        assert_eq!(flat, want);
+        assert!(want.chunk_by(|a, b| (a.0, a.1) == (b.0, b.1)).count() == got.runs.len());
+        // Points outside: the error counts them; NaN keys to voxel 0, inside this domain.
+        pts.extend([[5.0, 0.0, 0.0], [0.0, -9.0, 0.0], [f64::INFINITY, 0.0, 0.0], [f64::NAN; 3]]);
+        assert_eq!(keyed_points(&d, &pts).unwrap_err(), "3 target points lie outside the metric domain");
     }
 
     #[test]

@@ -14,6 +14,9 @@ cargo fmt --all -- --check
 echo "== cargo clippy"
 # Same profile as the tests, so the C++ solver (HiGHS) that a build script compiles is built once.
 cargo clippy --workspace --all-targets --locked --profile ci -- -D warnings
+echo "== cargo doc (no warnings: broken or private intra-doc links, stray brackets and tags)"
+# After clippy, whose dependency metadata it reuses: only the workspace's crates are documented.
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --locked --profile ci
 echo "== cargo test"
 # The learned-data test keeps the dataset it wrote for the Python loader's contract test.
 learn_data="$(mktemp -d)/learn-dataset"

@@ -20,7 +20,7 @@ use crate::common::{progress, TermProgress};
 
 #[derive(Subcommand)]
 pub enum Command {
-    /// Training data of a pool, as cases/<uid>.npz + manifest.json (resumable, shardable):
+    /// Training data of a pool, as `cases/<uid>.npz` + `manifest.json` (resumable, shardable):
     /// for nbv-net and ma-scvp per object the tammes-128 visible voxel sets, greedy oracle
     /// rollouts from every start view, the method's case sampling and each case's 64³ input
     /// grid; for completion per object partial clouds fused from 1-3 rendered tammes-128 views

@@ -1,7 +1,7 @@
 //! Exact minimum set cover by combinatorial search, for instances of at most 384 views — the
 //! planning protocol's size (tammes-128) in one 128-bit word per view set, and the hybrid
 //! planners' selections over tammes-360 (`completion-scp`, `completion-mcp`'s full-cover test) in
-//! three ([`Mask`]: the same steps on either width).
+//! three (`Mask`: the same steps on either width).
 //!
 //! Why: the set-cover ILPs of real objects have weak LP relaxations (LP 8.9 for an optimum of 11
 //! on a gear), and HiGHS spends most of its time proving the bound (35 s on that gear; 40 s even

@@ -154,7 +154,7 @@ pub trait Bucketed {
     fn supergrid(&self) -> &SuperGrid;
     /// Calls `f(index, position)` for every point in the 27 fine voxels within one voxel of
     /// `k` (each voxel once; the order is the store's): runs along x inside a block
-    /// ([`runs_in_box`]: one block lookup per run, an empty block skips its whole run).
+    /// (`runs_in_box`: one block lookup per run, an empty block skips its whole run).
     fn for_cells_around<F: FnMut(u32, [f64; 3])>(&self, k: [i32; 3], f: F) {
         self.for_cells_in_box(k.map(|x| x - 1), k.map(|x| x + 1), f)
     }
@@ -167,7 +167,7 @@ pub trait Bucketed {
     /// Lowers `best` (`(d², index)`; ties → the smaller index; a `NONE` index is a bound, not a
     /// point) over every point of the block with block key `b`: what showing them one by one to
     /// the scans' comparison gives. Stores with contiguous block points override it with
-    /// [`lower_best_over`].
+    /// `lower_best_over`.
     fn lower_best_in_block(&self, b: [i32; 3], p: [f64; 3], best: &mut (f64, u32)) {
         self.for_block(b, |i, q| lower_best(best, dist2(p, q), i));
     }
@@ -517,7 +517,7 @@ pub(crate) fn scan_ring2<S: Bucketed>(set: &S, p: [f64; 3], k: [i32; 3], best: &
 /// The nearest point of `set` to `p` with squared distance below `bound2` (exact; ties →
 /// the smaller index): `(d², index)`, or `(bound2, NONE)` when there is none. The 27 fine voxels
 /// around p first (anything outside them is ≥ h away), then, for a best within 3h, the next
-/// layer of voxels ([`scan_ring2`]), then rings of superblocks (after ring R
+/// layer of voxels (`scan_ring2`), then rings of superblocks (after ring R
 /// everything unseen is ≥ R·E away, E the superblock edge), visiting the occupied blocks of each
 /// superblock that could hold something closer, pruned by their boxes.
 pub fn nearest_in<S: Bucketed>(set: &S, p: [f64; 3], bound2: f64) -> (f64, u32) {
@@ -675,7 +675,7 @@ impl Slab {
 /// the blocks that could beat that bound for some point of the group are gathered once and
 /// sorted by their distance to the group's box, and each point scans them in that order (each
 /// starting from its predecessor's answer) until the next block's bound reaches its best. A
-/// block is skipped when its box, or its slab ([`Slab`]: on a smooth surface far thinner than
+/// block is skipped when its box, or its slab (`Slab`: on a smooth surface far thinner than
 /// the box), is no closer than the point's best so far: for points far off the surface (the
 /// inside of a sealed shell) a box bound lets every block within the answer's distance plus
 /// the box's depth through, a slab only those near the answer.

@@ -21,11 +21,11 @@
 //! and its input resampling. A partial cloud whose views see nothing (an empty fused cloud) is
 //! skipped and counted (`empty_partials`).
 //!
-//! The NPZ arrays of an object with n partial clouds: `partial` f32 [n, 2048, 3] (normalized
-//! input), `gt` f32 [n, G, 3] (ground truth in the same normalization), `centroid` f32 [n, 3]
-//! and `scale` f32 [n] (the normalization: object = normalized · scale + centroid), `views`
-//! i32 [n, max_views] (tammes-128 ids, −1 padded), `partial_points` i32 [n] (fused points before
-//! resampling), `d_plan` i32 [] (the split entry's proven d_plan, −1 when unknown).
+//! The NPZ arrays of an object with n partial clouds: `partial` f32 `[n, 2048, 3]` (normalized
+//! input), `gt` f32 `[n, G, 3]` (ground truth in the same normalization), `centroid` f32 `[n, 3]`
+//! and `scale` f32 `[n]` (the normalization: object = normalized · scale + centroid), `views`
+//! i32 `[n, max_views]` (tammes-128 ids, −1 padded), `partial_points` i32 `[n]` (fused points before
+//! resampling), `d_plan` i32 `[]` (the split entry's proven d_plan, −1 when unknown).
 
 use std::collections::BTreeMap;
 use std::path::Path;

@@ -14,7 +14,7 @@
 //! 4. **folding decoder** (FoldingNet / PCN): every coarse point c_m is paired with each point
 //!    u_k of a fixed s × s grid on [−r, r]² (r = `grid_scale`); the MLP
 //!    [g, u_k, c_m] → h (ReLU) → h (ReLU) → 3 gives an offset, fine point = c_m + offset.
-//!    The first layer is split by input ([g] once per cloud, [u_k] once per grid point, [c_m]
+//!    The first layer is split by input (`[g]` once per cloud, `[u_k]` once per grid point, `[c_m]`
 //!    once per coarse point, then broadcast-added) — the same function as one Linear over the
 //!    concatenation, without materializing it. M·s² = 6144 fine points
 //!    ([`objview_planners::hybrid::completion::NET_PREDICTED_POINTS`]), in the input's

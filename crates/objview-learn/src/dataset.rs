@@ -22,10 +22,10 @@
 //! 7. `write`: `cases/<uid>.npz` (temp file, then rename) and one line in the objects file.
 //!
 //! The NPZ arrays of an object with n cases (the contract of `python/objview/learn.py`):
-//! `grid` f32 [n, G, G, G] (C order, [x][y][z]), `visited` u8 [n, 128], `label` i64 [n] (oracle
-//! NBV), `gains` i32 [n, 128], `cover` u8 [n, 128] (multi-hot residual cover; zeros when not
-//! computed), `cover_status` i8 [n] (−1 not computed, 0 optimal, 1 time limit, 2 error),
-//! `start` i32 [n], `step` i32 [n], `covered` i32 [n], `universe` i32 [] (|U|).
+//! `grid` f32 `[n, G, G, G]` (C order, `[x][y][z]`), `visited` u8 `[n, 128]`, `label` i64 `[n]` (oracle
+//! NBV), `gains` i32 `[n, 128]`, `cover` u8 `[n, 128]` (multi-hot residual cover; zeros when not
+//! computed), `cover_status` i8 `[n]` (−1 not computed, 0 optimal, 1 time limit, 2 error),
+//! `start` i32 `[n]`, `step` i32 `[n]`, `covered` i32 `[n]`, `universe` i32 `[]` (|U|).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -10,7 +10,7 @@
 //! - [`record`]: the settings record every episode result carries (shared with the server);
 //!   [`provenance`]: the settings block of every other output file.
 //! - [`params`]: `NAME=VALUE` planner parameters; [`cache`]: cache locations.
-//! - [`bench`]: the measurement procedures of `objview bench …` (episode step, annotation,
+//! - [`bench`](mod@bench): the measurement procedures of `objview bench …` (episode step, annotation,
 //!   rendering).
 //!
 //! The batch driver itself (worker pool, input-order output, typed progress events) is

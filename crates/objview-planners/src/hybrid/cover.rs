@@ -11,7 +11,7 @@
 //!   large budgets (K = 30). Otherwise the exact branch and bound of `coverage_search`
 //!   (submodular gain bound, deterministic; it proves the K = 5 plans in well under a second)
 //!   on half the time left (at most 2 s), and if it has not finished, its incumbent improved by
-//!   1-swap exchanges ([`super::swap_search`]; optimal if that reaches the search's proven
+//!   1-swap exchanges (`swap_search`; optimal if that reaches the search's proven
 //!   bound), then a HiGHS ILP warm-started from it for the rest (whose selection, unless proven
 //!   optimal, gets the exchanges again):
 //!   `max Σ w_g y_g  s.t.  Σ x_i ≤ B,  y_g ≤ Σ_{i covers g} x_i,  x binary,  y ∈ [0, 1]`, where
@@ -51,7 +51,7 @@ pub const SEARCH_SHARE: f64 = 0.5;
 /// See [`SEARCH_SHARE`].
 pub const SEARCH_MAX_S: f64 = 2.0;
 
-/// Passes of 1-swap exchanges ([`super::swap_search`]) on a max-coverage selection that no
+/// Passes of 1-swap exchanges (`swap_search`) on a max-coverage selection that no
 /// solver proved optimal, before and after the ILP (each pass costs chosen × unchosen bitset
 /// ANDs, well under a millisecond at K = 30 over a few hundred candidates).
 pub const SWAP_PASSES: usize = 200;

@@ -1195,7 +1195,7 @@ mod tests {
             flat.extend(got.order[s..e].iter().map(|&i| (b, c, i)));
         }
         assert_eq!(flat, want);
-        assert!(want.chunk_by(|a, b| (a.0, a.1) == (b.0, b.1)).count() == got.runs.len());
+        assert_eq!(want.chunk_by(|a, b| (a.0, a.1) == (b.0, b.1)).count(), got.runs.len());
         // Points outside: the error counts them; NaN keys to voxel 0, inside this domain.
         pts.extend([[5.0, 0.0, 0.0], [0.0, -9.0, 0.0], [f64::INFINITY, 0.0, 0.0], [f64::NAN; 3]]);
         assert_eq!(keyed_points(&d, &pts).unwrap_err(), "3 target points lie outside the metric domain");

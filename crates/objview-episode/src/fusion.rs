@@ -9,7 +9,7 @@
 //! only around them.
 
 use crate::grid::{
-    block_of, key_runs, local_index, lower_best_over, nearest_in, runs_in_box, Bucketed, Domain, SuperGrid,
+    block_of, local_index, lower_best_over, nearest_in, runs_in_box, voxel_runs, Bucketed, Domain, SuperGrid,
     SuperHandle, BLOCK_CELLS, NONE,
 };
 
@@ -455,17 +455,10 @@ const FRESH_SORT_SHARE: usize = 16;
 /// without its blocks, tables and slot bookkeeping. For callers that need one view's fused cloud
 /// as a point set (the oracle's per-candidate coverage).
 ///
-/// The points are grouped by `grid::key_runs` on the key block index · 512 + local index, which
-/// orders the voxels by block and voxel and each voxel's points in input order.
+/// The points are grouped by voxel (`grid::voxel_runs`: key block index · 512 + local index),
+/// which orders the voxels by block and voxel and each voxel's points in input order.
 pub fn frame_centroids(domain: &Domain, points: &[[f64; 3]]) -> Vec<[f64; 3]> {
-    // Each voxel's points in input order, voxels by (block, local index).
-    let mut keys = Vec::new();
-    domain.keys_into(points, &mut keys);
-    let voxel = |i: usize| {
-        let k = keys[i];
-        domain.block_index(block_of(k)).map(|b| ((b as u64) << 9) | local_index(k) as u64)
-    };
-    let grouped = key_runs(points.len(), (domain.num_blocks() as u64) << 9, voxel);
+    let grouped = voxel_runs(domain, points);
     grouped
         .runs
         .iter()
@@ -496,8 +489,8 @@ mod tests {
     #[test]
     fn frame_centroids_are_a_fresh_clouds_positions() {
         // Many points per voxel (sums of several terms), voxels with one point, negative keys
-        // and points outside the domain (dropped by both); more than 2^20 points takes the
-        // second sort.
+        // and points outside the domain (dropped by both); more than 2^20 points (the index in
+        // 21 bits of the packed sort).
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
         let d = Domain::covering(0.005, [-0.2; 3], [0.2; 3], 0.0);
         for n in [1usize, 7, 500, 20_000, (1 << 20) + 3] {

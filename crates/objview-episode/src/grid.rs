@@ -840,18 +840,23 @@ pub(crate) fn key_runs(n: usize, key_bound: u64, key: impl Fn(usize) -> Option<u
     out
 }
 
-/// Every point of `points` by its fine voxel: the layout of the target sets. The runs' key is
-/// `block index · BLOCK_CELLS + local voxel index` (see [`cell_of_key`]), so the runs come by
-/// domain block, then voxel, each listing its points in input order. Points outside `domain`
-/// are an error naming how many.
-pub(crate) fn keyed_points(domain: &Domain, points: &[[f64; 3]]) -> Result<KeyRuns, String> {
+/// The points of `points` inside `domain` grouped by fine voxel: the run key is `block index ·
+/// BLOCK_CELLS + local voxel index` (see [`cell_of_key`]), so the runs come by domain block, then
+/// voxel, each listing its points in input order. Points outside `domain` are left out.
+pub(crate) fn voxel_runs(domain: &Domain, points: &[[f64; 3]]) -> KeyRuns {
     let mut keys = Vec::new();
     domain.keys_into(points, &mut keys);
     let bound = (domain.num_blocks() * BLOCK_CELLS) as u64;
-    let keyed = key_runs(points.len(), bound, |i| {
+    key_runs(points.len(), bound, |i| {
         let k = keys[i];
         domain.block_index(block_of(k)).map(|b| (b * BLOCK_CELLS + local_index(k)) as u64)
-    });
+    })
+}
+
+/// [`voxel_runs`] of every point: the layout of the target sets. Points outside `domain` are
+/// an error naming how many.
+pub(crate) fn keyed_points(domain: &Domain, points: &[[f64; 3]]) -> Result<KeyRuns, String> {
+    let keyed = voxel_runs(domain, points);
     let outside = points.len() - keyed.order.len();
     if outside > 0 {
         return Err(format!("{outside} target points lie outside the metric domain"));
@@ -859,7 +864,7 @@ pub(crate) fn keyed_points(domain: &Domain, points: &[[f64; 3]]) -> Result<KeyRu
     Ok(keyed)
 }
 
-/// `(domain block index, local voxel index)` of a [`keyed_points`] run key.
+/// `(domain block index, local voxel index)` of a [`voxel_runs`] run key.
 #[inline]
 pub(crate) fn cell_of_key(key: u64) -> (usize, usize) {
     ((key / BLOCK_CELLS as u64) as usize, (key % BLOCK_CELLS as u64) as usize)

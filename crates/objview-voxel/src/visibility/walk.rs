@@ -83,16 +83,15 @@ impl InverseCaster<'_> {
         ViewPlanes { planes, mirror, inv_r: 1.0 / r }
     }
 
-    /// The set-up of [`InverseCaster::cast`] for `ray` (whose `d` and `t_lo` are set): its
-    /// octant, reciprocals, grid-box entry and exit times, start time and start cell. The
+    /// The set-up of [`InverseCaster::cast`] for `ray` (whose `d`, `t_lo` and reciprocals
+    /// `s = 1/|d|` are set): its octant, `|d|`, grid-box entry and exit times, start time and start cell. The
     /// start is meaningful only for a ray that `cast` walks (no zero or NaN direction
     /// component, not rejected by the entry/exit tests); for any other it is some in-range
     /// cell, unused.
     #[inline(always)]
     pub(super) fn ray_start(&self, octants: &[Octant<'_>; 8], ray: &mut Ray, inv_r: f64) {
-        let d = ray.d;
+        let (d, s) = (ray.d, ray.s);
         let ad = [d[0].abs(), d[1].abs(), d[2].abs()];
-        let s = [1.0 / ad[0], 1.0 / ad[1], 1.0 / ad[2]];
         let oct = (d[0] < 0.0) as usize | ((d[1] < 0.0) as usize) << 1 | ((d[2] < 0.0) as usize) << 2;
         let o = &octants[oct];
         let (b0, b1) = (o.box0, o.box1);
@@ -106,7 +105,6 @@ impl InverseCaster<'_> {
             (ray.h[a], ray.tn[a]) = start_cell(o.pl[a], s[a], ad[a], inv_r, t0);
         }
         ray.ad = ad;
-        ray.s = s;
         ray.t_in = t_in;
         ray.t_out = t_out;
         ray.oct = oct as u8;

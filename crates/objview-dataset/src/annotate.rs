@@ -195,11 +195,8 @@ pub struct StageTimings {
     pub visibility: f64,
     /// The saturation fit (N*, d_sat, r_vis), seconds.
     pub fit: f64,
-    /// The exact cover, without waits for the HiGHS lock held by another object's solve.
+    /// The exact cover, seconds.
     pub cover: f64,
-    /// Waits for the HiGHS lock (parallel runs only).
-    #[serde(default)]
-    pub cover_lock_wait: f64,
 }
 
 /// One object's annotation: a line of `objview annotate` (field order = output order).
@@ -397,8 +394,7 @@ pub fn annotate_object(
     let t = Instant::now();
     let cover = solve_min_cover(&planning_bits, &settings.cover)
         .map_err(|source| DatasetError::Difficulty { path: path.to_path_buf(), source })?;
-    timings.cover_lock_wait = cover.lock_wait_seconds;
-    timings.cover = t.elapsed().as_secs_f64() - cover.lock_wait_seconds;
+    timings.cover = t.elapsed().as_secs_f64();
 
     let status = match &cover.status {
         CoverStatus::Optimal => "optimal".to_string(),

@@ -34,13 +34,20 @@
 //! Determinism: HiGHS runs on one thread with a fixed random seed, so an input solved to
 //! optimality always yields the same chosen views (HiGHS picks one of possibly several minimum
 //! covers; which one may change with the HiGHS version, pinned by Cargo.lock). Runs stopped by the
-//! time limit depend on machine speed. HiGHS calls (the LP and the ILP, not the reductions or
-//! the search) are serialized process-wide by a lock: HiGHS keeps global scheduler state, and
-//! concurrent solves from several threads have been reported unsafe (HiGHS PR #3141). Time spent
-//! waiting for that lock is reported (`lock_wait_seconds`) and not counted against the time
-//! limit nor in `seconds`.
+//! time limit depend on machine speed.
+//!
+//! Concurrency: solves on different threads run at the same time, with no lock. In the HiGHS
+//! version pinned here (1.16) the parallel scheduler is `thread_local`: one per application
+//! thread, shared only by the instances used on that thread and never visible to other threads
+//! (HiGHS `docs/src/parallel.md`, "Scheduler scope and lifetime"). What that page asks of
+//! callers holds in this workspace: every instance on a thread uses the same `threads` value
+//! (1: the cover solves here, the TSP and hybrid ILPs of `objview-planners`), and nothing resets
+//! a scheduler. (Earlier versions had a process-wide scheduler whose reset from the C API was
+//! unsafe across threads, HiGHS PR #3141; the workspace then serialized every HiGHS call with a
+//! process-wide lock, which left a core idle whenever two solves met, e.g. 11.9 s of one
+//! annotation worker's time in the demo of 2026-12-04.) Concurrent solves giving the same
+//! results as serial ones is tested.
 
-use std::sync::{Mutex, PoisonError};
 use std::time::Instant;
 
 use highs::{ColProblem, HighsModelStatus, HighsSolutionStatus, Model, Row, Sense, SolvedModel};
@@ -57,9 +64,6 @@ pub const DEFAULT_RANDOM_SEED: i32 = 0;
 pub const SEARCH_SHARE: f64 = 0.5;
 /// Tolerance when rounding fractional bounds up to integers (⌈x − tol⌉).
 pub const BOUND_ROUNDING_TOL: f64 = 1e-6;
-
-/// Serializes HiGHS solves within the process (see the module docs).
-static HIGHS_LOCK: Mutex<()> = Mutex::new(());
 
 /// Which exact method proves d_plan.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -235,7 +239,7 @@ pub struct CoverResult {
     pub mip_dual_bound: Option<f64>,
     /// Size of the deterministic greedy cover of the original instance.
     pub greedy_size: usize,
-    /// Total wall-clock time of the solve, without waits for the HiGHS lock, seconds.
+    /// Total wall-clock time of the solve, seconds.
     pub seconds: f64,
     /// Wall-clock time spent inside HiGHS (LP + ILP), seconds.
     pub solver_seconds: f64,
@@ -248,10 +252,6 @@ pub struct CoverResult {
     pub search_nodes: u64,
     /// Wall-clock time of the combinatorial search, seconds.
     pub search_seconds: f64,
-    /// Time spent waiting for another thread's HiGHS call, seconds (not in `seconds`, not
-    /// counted against the time limit).
-    #[serde(default)]
-    pub lock_wait_seconds: f64,
 }
 
 /// Minimum set cover of the universe seen by `views` (per-view bitsets over element ids, bit i of
@@ -262,9 +262,7 @@ pub struct CoverResult {
 pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<CoverResult, DifficultyError> {
     settings.validate()?;
     let start = Instant::now();
-    // Seconds spent waiting for the HiGHS lock: not counted against the time limit.
-    let waited = std::cell::Cell::new(0.0f64);
-    let remaining = || (settings.time_limit_s - (start.elapsed().as_secs_f64() - waited.get())).max(0.0);
+    let remaining = || (settings.time_limit_s - start.elapsed().as_secs_f64()).max(0.0);
 
     let inst = CoverInstance::from_bitsets(views, settings.min_views_per_element)?;
     let mut greedy = inst.greedy();
@@ -299,7 +297,6 @@ pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<C
         proven_by: "none".into(),
         search_nodes: 0,
         search_seconds: 0.0,
-        lock_wait_seconds: 0.0,
     };
     // The best cover of the reduced instance (view ids), the warm start of the ILP.
     let mut best_reduced = reduced_greedy.clone();
@@ -314,12 +311,8 @@ pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<C
         result.lp_bound = (forced + 1) as f64;
         result.lower_bound = forced + 1;
         let solver_start = Instant::now();
-        let waited_before = waited.get();
 
-        let lp = {
-            let _lock = highs_lock(&waited);
-            solve_relaxation(&matrix, reduced.n_elements(), settings, remaining())
-        };
+        let lp = solve_relaxation(&matrix, reduced.n_elements(), settings, remaining());
         let (mut lp_values, mut lp_duals): (Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new());
         match lp {
             Ok(Some(Relaxation { value, columns, duals })) => {
@@ -374,10 +367,7 @@ pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<C
         if result.status == CoverStatus::Optimal && !proven {
             // Warm start: the best cover of the reduced instance (feasible there by construction).
             let start_cols = position_mask(reduced, &best_reduced);
-            let mip = {
-                let _lock = highs_lock(&waited);
-                solve_ilp(&matrix, reduced.n_elements(), &start_cols, settings, remaining())
-            };
+            let mip = solve_ilp(&matrix, reduced.n_elements(), &start_cols, settings, remaining());
             if let Some(bound) = mip.dual_bound.filter(|b| b.is_finite()) {
                 result.mip_dual_bound = Some(forced as f64 + bound);
                 result.lower_bound = result.lower_bound.max(forced + ceil_bound(bound));
@@ -417,8 +407,7 @@ pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<C
                 Err(message) => CoverStatus::Error(message),
             };
         }
-        result.solver_seconds =
-            solver_start.elapsed().as_secs_f64() - (waited.get() - waited_before) - result.search_seconds;
+        result.solver_seconds = solver_start.elapsed().as_secs_f64() - result.search_seconds;
     }
 
     debug_assert!(inst.is_cover(&best), "the incumbent is always a cover");
@@ -445,18 +434,8 @@ pub fn solve_min_cover(views: &[Vec<u64>], settings: &CoverSettings) -> Result<C
     }
     result.best_size = best.len();
     result.best_cover = best;
-    result.seconds = start.elapsed().as_secs_f64() - waited.get();
-    result.lock_wait_seconds = waited.get();
+    result.seconds = start.elapsed().as_secs_f64();
     Ok(result)
-}
-
-/// Takes the process-wide HiGHS lock, adding the time spent waiting to `waited`. Every HiGHS
-/// call in the workspace (cover ILP, TSP ILP) holds it: concurrent HiGHS instances are unsafe.
-pub fn highs_lock(waited: &std::cell::Cell<f64>) -> std::sync::MutexGuard<'static, ()> {
-    let t = Instant::now();
-    let guard = HIGHS_LOCK.lock().unwrap_or_else(PoisonError::into_inner);
-    waited.set(waited.get() + t.elapsed().as_secs_f64());
-    guard
 }
 
 /// ⌈x − tol⌉ for a non-negative bound of an integer-valued objective.

@@ -233,3 +233,61 @@ fn time_limit_during_branch_and_bound_keeps_incumbent_and_bound() {
         assert_eq!(r.status, CoverStatus::Optimal, "{r:?}");
     }
 }
+
+/// Random instances whose ILP needs a little branch and bound (every element seen by 3 of 24
+/// views).
+fn random_instance(seed: u64) -> Vec<Vec<u64>> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let n_elements = 200;
+    let mut views = vec![vec![0u64; n_elements / 64 + 1]; 24];
+    for e in 0..n_elements {
+        for _ in 0..3 {
+            let v = rng.gen_range(0..24);
+            views[v][e / 64] |= 1 << (e % 64);
+        }
+    }
+    views
+}
+
+#[test]
+fn concurrent_solves_give_the_serial_results() {
+    // HiGHS runs on several threads at once (no process-wide lock; see the `ilp` module docs):
+    // each solve's LP and ILP, from 4 threads at a time and in several rounds, must give exactly
+    // what the same solve gives alone.
+    let ilp = CoverSettings { method: CoverMethod::Ilp, ..CoverSettings::default() };
+    let instances: Vec<Vec<Vec<u64>>> = (0..6).map(|s| random_instance(1000 + s)).collect();
+    let key = |r: &CoverResult| {
+        (r.status.clone(), r.d_plan, r.best_cover.clone(), r.lower_bound, r.proven_by.clone())
+    };
+    let serial: Vec<_> = instances.iter().map(|v| key(&solve_min_cover(v, &ilp).unwrap())).collect();
+    for (v, s) in instances.iter().zip(&serial) {
+        assert_eq!(s.0, CoverStatus::Optimal, "instance solved to optimality alone");
+        assert_eq!(s.4, "ilp");
+        check_consistent(v, 1, &solve_min_cover(v, &ilp).unwrap());
+    }
+    for round in 0..3 {
+        let results: Vec<Vec<_>> = std::thread::scope(|sc| {
+            let handles: Vec<_> = (0..4)
+                .map(|t| {
+                    let (instances, ilp) = (&instances, &ilp);
+                    sc.spawn(move || {
+                        // Each thread walks the instances from its own offset, so different
+                        // instances overlap.
+                        (0..instances.len())
+                            .map(|i| {
+                                let j = (i + 2 * t + round) % instances.len();
+                                (j, key(&solve_min_cover(&instances[j], ilp).unwrap()))
+                            })
+                            .collect::<Vec<_>>()
+                    })
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().unwrap()).collect()
+        });
+        for per_thread in results {
+            for (j, k) in per_thread {
+                assert_eq!(k, serial[j], "round {round}, instance {j}");
+            }
+        }
+    }
+}

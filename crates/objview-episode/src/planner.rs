@@ -258,7 +258,7 @@ mod tests {
         let v = serde_json::json!({
             "status": "optimal", "seconds": 1.5, "plan_seconds": 2.0,
             "selection": {"gap": 0.0, "seconds": 0.1, "seconds_left": 3},
-            "paths": [{"lock_wait_seconds": 0.2, "length": 4.0}]
+            "paths": [{"solve_seconds": 0.2, "length": 4.0}]
         });
         assert_eq!(
             without_seconds(v),

@@ -553,7 +553,7 @@ fn annotation_line(uid: &str, d_plan: Option<usize>) -> Value {
             "reduced_views": 128, "reduced_elements": 10},
         "solver_seconds": 0.1, "seconds": 1.0,
         "timings": {"load": 0.0, "ground_truth": 0.0, "voxelize": 0.0, "visibility": 0.0, "fit": 0.0,
-            "cover": 0.0, "cover_lock_wait": 0.0},
+            "cover": 0.0},
         "settings": {"resolution": 0.02}, "version": "0.1.0"
     })
 }

@@ -37,12 +37,10 @@
 //!
 //! Determinism: the DP breaks ties towards smaller node indices; the heuristics are deterministic;
 //! HiGHS runs on one thread with a fixed seed. The same input therefore gives the same order
-//! (runs stopped by the time limit depend on machine speed). Every HiGHS call holds the
-//! process-wide lock [`objview_difficulty::ilp::highs_lock`] (concurrent HiGHS instances are
-//! unsafe); the time spent waiting for it is reported separately and not counted against the
-//! time limit.
+//! (runs stopped by the time limit depend on machine speed). HiGHS solves on different threads
+//! run concurrently (thread-local schedulers, every instance with `threads` = 1; see
+//! `objview_difficulty::ilp`).
 
-use std::cell::Cell;
 use std::time::Instant;
 
 use highs::{Col, HighsModelStatus, HighsSolutionStatus, RowProblem, Sense};
@@ -163,9 +161,8 @@ impl std::fmt::Display for TspMethod {
 /// Settings of [`shortest_open_path`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TspSettings {
-    /// Wall-clock limit of the solve (heuristic + ILP), seconds; may be +∞. Time spent waiting
-    /// for the process-wide HiGHS lock is not counted. The DP ignores it (it is bounded by
-    /// [`DP_NODES_LIMIT`]).
+    /// Wall-clock limit of the solve (heuristic + ILP), seconds; may be +∞. The DP ignores it
+    /// (it is bounded by [`DP_NODES_LIMIT`]).
     pub time_limit_s: f64,
     /// Instances with at most this many nodes are solved by the Held–Karp DP (≤
     /// [`DP_NODES_LIMIT`]); 0 sends every instance with more than 2 nodes to the ILP.
@@ -216,10 +213,8 @@ pub struct TspResult {
     pub heuristic_length: Option<f64>,
     /// Whether the matrix is exactly symmetric (the ILP then uses the edge formulation).
     pub symmetric: bool,
-    /// Wall-clock time of the solve without waits for the HiGHS lock, seconds.
+    /// Wall-clock time of the solve, seconds.
     pub seconds: f64,
-    /// Time spent waiting for another thread's HiGHS call, seconds (not in `seconds`).
-    pub lock_wait_seconds: f64,
     /// Number of HiGHS solves (0 for the DP).
     pub ilp_solves: usize,
     /// Number of subtour elimination constraints added.
@@ -253,14 +248,13 @@ pub fn shortest_open_path(
             heuristic_length: None,
             symmetric,
             seconds: 0.0,
-            lock_wait_seconds: 0.0,
             ilp_solves: 0,
             cuts: 0,
         }
     } else {
         solve_with_ilp(dist, start, symmetric, settings, t0)?
     };
-    result.seconds = (t0.elapsed().as_secs_f64() - result.lock_wait_seconds).max(0.0);
+    result.seconds = t0.elapsed().as_secs_f64();
     Ok(result)
 }
 
@@ -796,9 +790,7 @@ fn solve_with_ilp(
 ) -> Result<TspResult, TspError> {
     let n = dist.len();
     let solver_error = |message: String| TspError::Solver { n, message };
-    // Seconds spent waiting for the HiGHS lock: not counted against the time limit.
-    let waited = Cell::new(0.0f64);
-    let remaining = || settings.time_limit_s - (t0.elapsed().as_secs_f64() - waited.get());
+    let remaining = || settings.time_limit_s - t0.elapsed().as_secs_f64();
     let proven = |length: f64, bound: f64| length <= bound + OPTIMALITY_RTOL * bound.abs().max(1.0);
 
     let mut best = heuristic(dist, start);
@@ -816,11 +808,7 @@ fn solve_with_ilp(
             break;
         }
         let warm = form.values_of(&best);
-        let run = {
-            let _lock = objview_difficulty::ilp::highs_lock(&waited);
-            run_highs(&form, &cuts, &warm, limit)
-        }
-        .map_err(solver_error)?;
+        let run = run_highs(&form, &cuts, &warm, limit).map_err(solver_error)?;
         solves += 1;
         let stopped = match run.status {
             HighsModelStatus::Optimal => false,
@@ -889,7 +877,6 @@ fn solve_with_ilp(
         heuristic_length: Some(heuristic_length),
         symmetric,
         seconds: 0.0,
-        lock_wait_seconds: waited.get(),
         ilp_solves: solves,
         cuts: cuts.len(),
     })
@@ -1043,7 +1030,6 @@ mod tests {
                     heuristic_length: None,
                     symmetric: false,
                     seconds: 0.0,
-                    lock_wait_seconds: 0.0,
                     ilp_solves: 0,
                     cuts: 0,
                 };

@@ -28,7 +28,7 @@ use std::collections::HashMap;
 use std::time::Instant;
 
 use highs::{ColProblem, HighsModelStatus, HighsSolutionStatus, Sense};
-use objview_difficulty::ilp::{highs_lock, solve_min_cover, CoverSettings, CoverStatus};
+use objview_difficulty::ilp::{solve_min_cover, CoverSettings, CoverStatus};
 use serde::{Deserialize, Serialize};
 
 use super::coverage_search::search_max_coverage;
@@ -73,7 +73,7 @@ pub struct Selection {
     pub bound: f64,
     /// |objective − bound| (0 when optimal).
     pub gap: f64,
-    /// Seconds in the solve (without waits for the process-wide HiGHS lock).
+    /// Seconds in the solve.
     pub seconds: f64,
 }
 
@@ -297,11 +297,7 @@ fn max_coverage_in(
         return optimal(chosen, covered, t);
     }
     let time_limit_s = (time_limit_s - t.elapsed().as_secs_f64()).max(0.0);
-    let waited = std::cell::Cell::new(0.0);
-    let solved = {
-        let _lock = highs_lock(&waited);
-        solve_max_coverage(&kept_cols, &weights, budget, &incumbent, time_limit_s)
-    };
+    let solved = solve_max_coverage(&kept_cols, &weights, budget, &incumbent, time_limit_s);
     let search_bound = found.bound as f64;
     // Kept indices throughout; the ILP's selection replaces the incumbent only if it covers
     // more, and a selection the ILP did not prove optimal gets the exchanges again.
@@ -322,7 +318,7 @@ fn max_coverage_in(
     }
     let chosen: Vec<usize> = chosen.iter().map(|&i| kept[i]).collect();
     let covered = value(&chosen);
-    let seconds = t.elapsed().as_secs_f64() - waited.get();
+    let seconds = t.elapsed().as_secs_f64();
     let bound = bound.min(reachable as f64).max(covered as f64);
     let mut sel = Selection { chosen, covered, needed: reachable, status, bound, gap: 0.0, seconds };
     if sel.status == "optimal" || sel.covered as f64 >= sel.bound {

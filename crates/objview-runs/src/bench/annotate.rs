@@ -59,7 +59,6 @@ pub fn stage_medians<'a>(runs: impl IntoIterator<Item = &'a StageTimings>) -> St
         visibility: m(|t| t.visibility),
         fit: m(|t| t.fit),
         cover: m(|t| t.cover),
-        cover_lock_wait: m(|t| t.cover_lock_wait),
     }
 }
 
@@ -470,7 +469,6 @@ mod tests {
             visibility: 4.0 * x,
             fit: 5.0 * x,
             cover: 6.0 * x,
-            cover_lock_wait: 7.0 * x,
         }
     }
 

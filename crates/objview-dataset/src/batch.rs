@@ -10,10 +10,8 @@
 
 use std::fmt;
 use std::path::Path;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Mutex;
-
-use rayon::prelude::*;
 
 use crate::error::DatasetError;
 use crate::inputs::ObjectRef;
@@ -199,7 +197,11 @@ where
     W: Fn(&ObjectRef) -> ItemOutcome + Sync,
     P: Fn(&ObjectRef, &ItemOutcome) + Sync,
 {
-    let mut s = run_batches(vec![Batch { items, out, existing }], |_, o| work(o), |_, o, r| progress(o, r))?;
+    let mut s = run_batches(
+        vec![Batch { items, out, existing, weight: 0.0 }],
+        |_, o| work(o),
+        |_, o, r| progress(o, r),
+    )?;
     Ok(s.remove(0))
 }
 
@@ -211,14 +213,26 @@ pub struct Batch<'a> {
     pub out: ResumableJsonl,
     /// What it already holds (those items are skipped).
     pub existing: &'a Existing,
+    /// Expected cost of one item, in any unit shared by the batches of one call: the items of
+    /// heavier batches start first (see [`run_batches`]). It orders the work only; lines,
+    /// files and results do not depend on it.
+    pub weight: f64,
 }
 
 /// [`run_batch`] for several batches at once: the items of every batch (not yet in its file)
-/// form one list of work on the current rayon pool, so the cores stay busy across batches
+/// form one queue of work on the current rayon pool, so the cores stay busy across batches
 /// instead of idling at the end of each. `work(b, item)` processes an item of batch `b` and
 /// `progress(b, item, outcome)` sees it finished (from worker threads); each batch's lines go
 /// to its own file in its own input order, so every file is the one that [`run_batch`] alone
-/// would write. A write error stops all batches (what was written stays valid and resumable).
+/// would write. A write error stops all batches (items not yet started are not run; what was
+/// written stays valid and resumable).
+///
+/// Order: the queue holds the batches by descending [`Batch::weight`] (equal weights in input
+/// order), each batch's items in input order, and every worker takes the next item of the queue
+/// when it is free (rayon's FIFO scope). Starting the long items first and ending with the short
+/// ones is the longest-processing-time rule: the last worker to finish waits for the others
+/// only as long as a short item takes. (A split of the list in halves, as a parallel iterator
+/// does, may leave one long item running alone at the end.)
 pub fn run_batches<W, P>(
     batches: Vec<Batch<'_>>,
     work: W,
@@ -231,6 +245,7 @@ where
     let mut todo: Vec<(usize, usize, &ObjectRef)> = Vec::new();
     let mut writers = Vec::with_capacity(batches.len());
     let mut summaries = Vec::with_capacity(batches.len());
+    let mut weights = Vec::with_capacity(batches.len());
     for (b, batch) in batches.into_iter().enumerate() {
         let items: Vec<&ObjectRef> =
             batch.items.iter().filter(|o| !batch.existing.done.contains(&o.uid)).collect();
@@ -242,19 +257,39 @@ where
         });
         todo.extend(items.into_iter().enumerate().map(|(seq, o)| (b, seq, o)));
         writers.push(Mutex::new(OrderedWriter::new(batch.out)));
+        weights.push(batch.weight);
     }
+    // Stable: equal weights keep the input order, and within a batch its items' order.
+    todo.sort_by(|x, y| weights[y.0].total_cmp(&weights[x.0]));
     let failed: Vec<AtomicUsize> = summaries.iter().map(|_| AtomicUsize::new(0)).collect();
-    todo.par_iter().with_max_len(1).try_for_each(|&(b, seq, obj)| {
-        let outcome = work(b, obj);
-        if outcome.failed {
-            failed[b].fetch_add(1, Ordering::Relaxed);
+    let stop = AtomicBool::new(false);
+    let error: Mutex<Option<DatasetError>> = Mutex::new(None);
+    let (work, progress, writers, failed) = (&work, &progress, &writers, &failed);
+    let (stop, error) = (&stop, &error);
+    rayon::scope_fifo(|s| {
+        for &(b, seq, obj) in &todo {
+            s.spawn_fifo(move |_| {
+                if stop.load(Ordering::Relaxed) {
+                    return;
+                }
+                let outcome = work(b, obj);
+                if outcome.failed {
+                    failed[b].fetch_add(1, Ordering::Relaxed);
+                }
+                progress(b, obj, &outcome);
+                let mut w = writers[b].lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+                if let Err(e) = w.push(seq, outcome.line) {
+                    stop.store(true, Ordering::Relaxed);
+                    error.lock().unwrap_or_else(std::sync::PoisonError::into_inner).get_or_insert(e);
+                }
+            });
         }
-        progress(b, obj, &outcome);
-        let mut w = writers[b].lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-        w.push(seq, outcome.line).map(|_| ())
-    })?;
+    });
+    if let Some(e) = error.lock().unwrap_or_else(std::sync::PoisonError::into_inner).take() {
+        return Err(e);
+    }
     for (s, f) in summaries.iter_mut().zip(failed) {
-        s.failed = f.into_inner();
+        s.failed = f.load(Ordering::Relaxed);
     }
     Ok(summaries)
 }
@@ -326,8 +361,8 @@ mod tests {
             .install(|| {
                 run_batches(
                     vec![
-                        Batch { items: &a, out: oa, existing: &ea },
-                        Batch { items: &b, out: ob, existing: &eb },
+                        Batch { items: &a, out: oa, existing: &ea, weight: 1.0 },
+                        Batch { items: &b, out: ob, existing: &eb, weight: 2.0 },
                     ],
                     |i, o| {
                         seen.lock().unwrap().push((i, o.uid.clone()));
@@ -348,6 +383,37 @@ mod tests {
         want.extend(b[4..].iter().map(|o| (1, o.uid.clone())));
         want.sort();
         assert_eq!(seen, want);
+    }
+
+    #[test]
+    fn heavier_batches_start_first_and_items_keep_their_order() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b, c) = (objs(3), objs(4), objs(2));
+        let open = |name: &str| ResumableJsonl::open(&dir.path().join(name), "uid", false).unwrap();
+        let ((oa, ea), (ob, eb), (oc, ec)) = (open("a"), open("b"), open("c"));
+        let started = Mutex::new(Vec::new());
+        // One worker, so that the start order is the queue order exactly (with more, workers
+        // take items in that order but may record their starts a little out of it).
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+        pool.install(|| {
+            run_batches(
+                vec![
+                    Batch { items: &a, out: oa, existing: &ea, weight: 1.0 },
+                    Batch { items: &b, out: ob, existing: &eb, weight: 5.0 },
+                    Batch { items: &c, out: oc, existing: &ec, weight: 1.0 },
+                ],
+                |i, o| {
+                    started.lock().unwrap().push((i, o.uid.clone()));
+                    work(o)
+                },
+                |_, _, _| {},
+            )
+        })
+        .unwrap();
+        let mut want: Vec<(usize, String)> = b.iter().map(|o| (1, o.uid.clone())).collect();
+        want.extend(a.iter().map(|o| (0, o.uid.clone())));
+        want.extend(c.iter().map(|o| (2, o.uid.clone())));
+        assert_eq!(started.into_inner().unwrap(), want);
     }
 
     #[test]

@@ -7,8 +7,10 @@
 //! settings record of its lines ([`crate::record::RunRecord`]) identifies the run; a results
 //! file of another run is refused ([`check_same_run`]) rather than silently "resumed".
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::atomic::AtomicUsize;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use objview_dataset::annotate::gt_cloud_path;
@@ -92,6 +94,29 @@ impl RunSummary {
 }
 
 impl EpisodePlan {
+    /// A rough relative cost of one episode of this plan, used only to start the heavier plans
+    /// of [`run_plans`] first (it changes no result): views × (100 + feasible candidates).
+    /// Views: K + 1 for a fixed budget; with the automatic one, the largest checkpoint + 1 when
+    /// the enough-info stop is on (iterative runs stop there), else the cap. The candidate term:
+    /// iterative planners score every feasible candidate each step and plans solve over them,
+    /// so a step's planner work grows with their number; the 100 stands for the engine's own
+    /// step. Measured in the demo (2026-12-04, s per episode): whole-space auto runs of `rse`,
+    /// `rse-mov`, `completion-nbv` 10–12 s (estimate 31 × 460), `completion-mcp` K=30 12 s
+    /// (31 × 460), quarter-space auto runs 4–5 s (31 × 191), K=5 runs 1–2 s (6 × 460).
+    /// Cheap planners are overestimated (e.g. `random-tsp` K=30, 2 s), which only starts them
+    /// early; no long run is underestimated into the tail.
+    pub fn work_estimate(&self) -> f64 {
+        let s = &self.settings;
+        let views = match self.budget {
+            Budget::Fixed(k) => k + 1,
+            Budget::Auto if s.enough_info => s.checkpoint_ks.iter().max().map_or(s.cap, |&k| k + 1),
+            Budget::Auto => s.cap,
+        }
+        .min(s.cap);
+        let feasible = self.space.feasible_mask(&self.candidates).into_iter().filter(|&f| f).count();
+        views as f64 * (100 + feasible) as f64
+    }
+
     /// A plan with the SPEC defaults for everything but the planner, objects and output:
     /// view space `whole`, budget `auto`, candidates `tammes-360`, seed 0, every core, unit
     /// normalization, sampled ground truth, the default reference cache, the default start
@@ -184,7 +209,17 @@ impl EpisodePlan {
         planners: &Registry,
         record: &Value,
     ) -> Result<EpisodeResult, RunError> {
-        let scene = Arc::new(self.scene(obj)?);
+        self.episode_on(Arc::new(self.scene(obj)?), planners, record)
+    }
+
+    /// [`EpisodePlan::episode`] on a scene already built by [`EpisodePlan::scene`] (the same
+    /// result: an episode only reads its scene).
+    pub fn episode_on(
+        &self,
+        scene: Arc<Scene>,
+        planners: &Registry,
+        record: &Value,
+    ) -> Result<EpisodeResult, RunError> {
         let mut planner = planners.with_params(&self.planner, &self.params).map_err(RunError::Invalid)?;
         Ok(run_episode(
             scene,
@@ -200,10 +235,26 @@ impl EpisodePlan {
 
     /// The batch item of `obj`: its episode's line, or a failure line when it could not run.
     pub fn item(&self, obj: &ObjectRef, planners: &Registry, record: &Value) -> ItemOutcome {
-        match self.episode(obj, planners, record) {
+        self.outcome(obj, self.episode(obj, planners, record), record)
+    }
+
+    /// The batch item of `obj` from its episode's outcome.
+    fn outcome(&self, obj: &ObjectRef, res: Result<EpisodeResult, RunError>, record: &Value) -> ItemOutcome {
+        match res {
             Ok(res) => episode_item(&res),
             Err(e) => failure_item(obj, "mesh", &obj.mesh.display().to_string(), &e.to_string(), record),
         }
+    }
+
+    /// Everything [`EpisodePlan::scene`] depends on, as one string: plans with equal keys
+    /// build equal scenes of `obj` (`None` when the ground-truth path cannot be resolved; that
+    /// error is the episode's).
+    fn scene_key(&self, obj: &ObjectRef) -> Option<String> {
+        let gt = gt_cloud_path(obj, self.gt_cloud_dir.as_deref()).ok()?;
+        Some(format!(
+            "{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}",
+            obj.uid, obj.mesh, gt, self.normalize, self.space_name, self.space, self.settings, self.cache_dir
+        ))
     }
 
     /// The scene of `obj` as this plan's episodes see it (building and caching its observable
@@ -243,11 +294,72 @@ impl EpisodePlan {
     }
 }
 
+/// A scene shared by the episodes of [`run_plans`] with one scene key: built on first use, kept
+/// while episodes that need it are left. Generic over the value, so that it is tested without
+/// building scenes.
+struct Shared<T> {
+    slot: Mutex<Slot<T>>,
+    /// Episodes of this key not finished yet.
+    left: AtomicUsize,
+}
+
+type SharedScene = Shared<Scene>;
+
+impl<T> Default for Shared<T> {
+    fn default() -> Self {
+        Shared { slot: Mutex::new(Slot::Empty), left: AtomicUsize::new(0) }
+    }
+}
+
+enum Slot<T> {
+    Empty,
+    /// An episode is building it.
+    Building,
+    /// Built (or the error building it gave: every episode of the key fails with it).
+    Ready(Result<Arc<T>, String>),
+}
+
+impl<T> Shared<T> {
+    /// The scene, built by `build` if no episode has built it yet. No lock is held while
+    /// building, and nothing waits for a build: an episode that comes while another one builds
+    /// the scene builds its own copy (the same scene). Waiting would be unsafe inside a rayon
+    /// job: the builder may be this very thread, suspended in a parallel loop of the build,
+    /// which let it take up this episode meanwhile. In a run, an object's first episodes are
+    /// several episodes apart in the queue, so copies are rare.
+    fn get(&self, build: impl FnOnce() -> Result<T, RunError>) -> Result<Arc<T>, RunError> {
+        let lock = || self.slot.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        {
+            let mut slot = lock();
+            match &*slot {
+                Slot::Ready(r) => return r.clone().map_err(RunError::Invalid),
+                Slot::Building => {
+                    drop(slot);
+                    return build().map(Arc::new);
+                }
+                Slot::Empty => *slot = Slot::Building,
+            }
+        }
+        let built = build().map(Arc::new).map_err(|e| e.to_string());
+        // This episode has not called `done` yet, so the slot is still wanted.
+        *lock() = Slot::Ready(built.clone());
+        built.map_err(RunError::Invalid)
+    }
+
+    /// One episode of this key is done: the last one drops the scene.
+    fn done(&self) {
+        if self.left.fetch_sub(1, std::sync::atomic::Ordering::AcqRel) == 1 {
+            *self.slot.lock().unwrap_or_else(std::sync::PoisonError::into_inner) = Slot::Empty;
+        }
+    }
+}
+
 /// Runs several plans as one batch ([`objview_dataset::run_batches`]): the episodes of every
 /// plan share one pool of `threads` workers (`None`: every core), so the cores stay busy across
 /// plans; each plan's results file is the one [`EpisodePlan::run`] would write (same lines,
-/// same order). Plans with a reference cache folder first build the observable reference of
-/// each distinct object once, in parallel, so that no two episodes build the same one. Each
+/// same order). The episodes of one object in one view space share its scene (built once, by
+/// the first of them; see `SharedScene`), so that no two episodes build the same observable
+/// reference or target indexes. The episodes of the plans with the largest [`EpisodePlan::work_estimate`] start first, so that
+/// the run ends on short episodes instead of one long one with the other cores idle. Each
 /// summary's `seconds` is the sum of its plan's episode times (they ran interleaved).
 pub fn run_plans(
     plans: &[EpisodePlan],
@@ -268,38 +380,46 @@ pub fn run_plans(
         outs.push(out);
         existing.push(ex);
     }
-    // One reference build per distinct object (with the first plan that runs it), before the
-    // episodes, so that concurrent episodes of one object read it from the cache.
-    let mut warm: Vec<(&EpisodePlan, &ObjectRef)> = Vec::new();
-    let mut seen = std::collections::BTreeSet::new();
+    // The scene of an object in a view space is built once, by the first episode that needs it,
+    // shared by every episode of the plans with the same scene key (their episodes only read
+    // it), and dropped when the last of them is done: the mesh, the ground truth, the observable
+    // reference and the targets' indexes are not rebuilt per episode, and no two episodes build
+    // the same reference at once.
+    let mut shared: HashMap<String, SharedScene> = HashMap::new();
     for (plan, ex) in plans.iter().zip(&existing) {
-        if plan.cache_dir.is_none() {
-            continue;
-        }
-        for obj in &plan.objects {
-            if !ex.done.contains(&obj.uid) && seen.insert(obj.mesh.clone()) {
-                warm.push((plan, obj));
+        for obj in plan.objects.iter().filter(|o| !ex.done.contains(&o.uid)) {
+            if let Some(key) = plan.scene_key(obj) {
+                shared.entry(key).or_default().left.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             }
         }
     }
     let busy: Vec<std::sync::Mutex<f64>> = plans.iter().map(|_| std::sync::Mutex::new(0.0)).collect();
     let summaries = pool.install(|| {
-        use rayon::prelude::*;
-        // A scene that cannot be built fails its episodes below, with the error in their lines.
-        warm.par_iter().with_max_len(1).for_each(|(plan, obj)| {
-            let _ = plan.scene(obj);
-        });
         let batches = plans
             .iter()
             .zip(outs)
             .zip(&existing)
-            .map(|((plan, out), existing)| objview_dataset::Batch { items: &plan.objects, out, existing })
+            .map(|((plan, out), existing)| objview_dataset::Batch {
+                items: &plan.objects,
+                out,
+                existing,
+                weight: plan.work_estimate(),
+            })
             .collect();
         objview_dataset::run_batches(
             batches,
             |b, obj| {
                 let t = Instant::now();
-                let outcome = plans[b].item(obj, planners, &records[b]);
+                let plan = &plans[b];
+                let outcome = match plan.scene_key(obj).and_then(|k| shared.get(&k)) {
+                    Some(sh) => {
+                        let scene = sh.get(|| plan.scene(obj));
+                        let res = scene.and_then(|scene| plan.episode_on(scene, planners, &records[b]));
+                        sh.done();
+                        plan.outcome(obj, res, &records[b])
+                    }
+                    None => plan.item(obj, planners, &records[b]),
+                };
                 *busy[b].lock().unwrap_or_else(std::sync::PoisonError::into_inner) +=
                     t.elapsed().as_secs_f64();
                 outcome
@@ -412,6 +532,65 @@ pub fn check_same_run(out: &Path, record: &Value) -> Result<(), RunError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_shared_value_is_built_once_shared_and_dropped_after_the_last_user() {
+        let sh: Shared<String> = Shared::default();
+        sh.left.store(3, std::sync::atomic::Ordering::Relaxed);
+        let builds = std::cell::Cell::new(0);
+        let build = || {
+            builds.set(builds.get() + 1);
+            Ok::<_, RunError>(format!("scene {}", builds.get()))
+        };
+        let a = sh.get(build).unwrap();
+        let b = sh.get(build).unwrap();
+        assert!(Arc::ptr_eq(&a, &b), "the second user gets the first build");
+        assert_eq!((builds.get(), a.as_str()), (1, "scene 1"));
+        sh.done();
+        sh.done();
+        assert!(matches!(*sh.slot.lock().unwrap(), Slot::Ready(_)), "one user is left");
+        sh.done();
+        assert!(matches!(*sh.slot.lock().unwrap(), Slot::Empty), "dropped after the last user");
+        // While a build is under way, a second user builds its own copy instead of waiting.
+        *sh.slot.lock().unwrap() = Slot::Building;
+        let c = sh.get(build).unwrap();
+        assert_eq!((builds.get(), c.as_str()), (2, "scene 2"));
+        assert!(matches!(*sh.slot.lock().unwrap(), Slot::Building), "the builder's slot is left alone");
+    }
+
+    #[test]
+    fn a_failed_build_fails_every_user_with_its_message() {
+        let sh: Shared<String> = Shared::default();
+        sh.left.store(2, std::sync::atomic::Ordering::Relaxed);
+        let builds = std::cell::Cell::new(0);
+        let build = || {
+            builds.set(builds.get() + 1);
+            Err::<String, _>(RunError::Invalid("x.obj: no faces".into()))
+        };
+        let e1 = sh.get(build).unwrap_err().to_string();
+        let e2 = sh.get(build).unwrap_err().to_string();
+        assert_eq!((e1.as_str(), e2.as_str(), builds.get()), ("x.obj: no faces", "x.obj: no faces", 1));
+    }
+
+    #[test]
+    fn work_estimate_is_views_times_feasible_candidates_plus_the_engine() {
+        let mut p = EpisodePlan::new("rse", Vec::new(), PathBuf::from("x.jsonl")).unwrap();
+        p.settings.checkpoint_ks = vec![5, 30];
+        // tammes-360: 360 feasible in `whole`, 91 in `quarter` (SPEC's feasibility counts).
+        assert_eq!(p.work_estimate(), 31.0 * 460.0);
+        p.budget = Budget::Fixed(5);
+        assert_eq!(p.work_estimate(), 6.0 * 460.0);
+        p.budget = Budget::Fixed(500);
+        assert_eq!(p.work_estimate(), 129.0 * 460.0, "at most the cap");
+        p.budget = Budget::Auto;
+        p.settings.enough_info = false;
+        assert_eq!(p.work_estimate(), 129.0 * 460.0, "no enough-info stop: the cap");
+        p.settings.enough_info = true;
+        p.space = ViewSpace::builtin("quarter").unwrap();
+        assert_eq!(p.work_estimate(), 31.0 * 191.0);
+        p.settings.checkpoint_ks.clear();
+        assert_eq!(p.work_estimate(), 129.0 * 191.0, "no checkpoint: the cap");
+    }
 
     #[test]
     fn another_run_is_refused_and_timings_or_missing_keys_do_not_count() {

@@ -189,19 +189,24 @@ fn spherical_cap_instance_128_views_solves_to_optimality() {
     assert_eq!(again.d_plan, r.d_plan);
 }
 
-/// A random instance without geometric structure: 128 views, every element seen by 6 random
-/// views. Its LP gap makes branch and bound work for a long time.
-fn hard_instance() -> Vec<Vec<u64>> {
-    let mut rng = ChaCha8Rng::seed_from_u64(42);
-    let n_elements = 4000;
-    let mut views = vec![vec![0u64; n_elements / 64 + 1]; 128];
+/// A random instance without geometric structure: `n_views` views, every one of `n_elements`
+/// elements seen by `per_element` random views (with repeats).
+fn random_instance(seed: u64, n_elements: usize, n_views: usize, per_element: usize) -> Vec<Vec<u64>> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut views = vec![vec![0u64; n_elements / 64 + 1]; n_views];
     for e in 0..n_elements {
-        for _ in 0..6 {
-            let v = rng.gen_range(0..128);
+        for _ in 0..per_element {
+            let v = rng.gen_range(0..n_views);
             views[v][e / 64] |= 1 << (e % 64);
         }
     }
     views
+}
+
+/// 128 views, every element seen by 6 random views: its LP gap makes branch and bound work for
+/// a long time.
+fn hard_instance() -> Vec<Vec<u64>> {
+    random_instance(42, 4000, 128, 6)
 }
 
 #[test]
@@ -234,28 +239,14 @@ fn time_limit_during_branch_and_bound_keeps_incumbent_and_bound() {
     }
 }
 
-/// Random instances whose ILP needs a little branch and bound (every element seen by 3 of 24
-/// views).
-fn random_instance(seed: u64) -> Vec<Vec<u64>> {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let n_elements = 200;
-    let mut views = vec![vec![0u64; n_elements / 64 + 1]; 24];
-    for e in 0..n_elements {
-        for _ in 0..3 {
-            let v = rng.gen_range(0..24);
-            views[v][e / 64] |= 1 << (e % 64);
-        }
-    }
-    views
-}
-
 #[test]
 fn concurrent_solves_give_the_serial_results() {
     // HiGHS runs on several threads at once (no process-wide lock; see the `ilp` module docs):
     // each solve's LP and ILP, from 4 threads at a time and in several rounds, must give exactly
     // what the same solve gives alone.
     let ilp = CoverSettings { method: CoverMethod::Ilp, ..CoverSettings::default() };
-    let instances: Vec<Vec<Vec<u64>>> = (0..6).map(|s| random_instance(1000 + s)).collect();
+    // Every element seen by 3 of 24 views: a little branch and bound each.
+    let instances: Vec<Vec<Vec<u64>>> = (0..6).map(|s| random_instance(1000 + s, 200, 24, 3)).collect();
     let key = |r: &CoverResult| {
         (r.status.clone(), r.d_plan, r.best_cover.clone(), r.lower_bound, r.proven_by.clone())
     };

@@ -358,9 +358,10 @@ impl<T> Shared<T> {
 /// plans; each plan's results file is the one [`EpisodePlan::run`] would write (same lines,
 /// same order). The episodes of one object in one view space share its scene (built once, by
 /// the first of them; see `SharedScene`), so that no two episodes build the same observable
-/// reference or target indexes. The episodes of the plans with the largest [`EpisodePlan::work_estimate`] start first, so that
-/// the run ends on short episodes instead of one long one with the other cores idle. Each
-/// summary's `seconds` is the sum of its plan's episode times (they ran interleaved).
+/// reference or target indexes. The episodes of the plans with the largest
+/// [`EpisodePlan::work_estimate`] start first, so that the run ends on short episodes instead
+/// of one long one with the other cores idle. Each summary's `seconds` is the sum of its plan's
+/// episode times, scene builds included (they ran interleaved).
 pub fn run_plans(
     plans: &[EpisodePlan],
     planners: &Registry,

@@ -10,7 +10,7 @@
 
 use std::fmt;
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
 use crate::error::DatasetError;
@@ -262,14 +262,14 @@ where
     // Stable: equal weights keep the input order, and within a batch its items' order.
     todo.sort_by(|x, y| weights[y.0].total_cmp(&weights[x.0]));
     let failed: Vec<AtomicUsize> = summaries.iter().map(|_| AtomicUsize::new(0)).collect();
-    let stop = AtomicBool::new(false);
+    // The first write error; once it is set, items not yet started are not run.
     let error: Mutex<Option<DatasetError>> = Mutex::new(None);
-    let (work, progress, writers, failed) = (&work, &progress, &writers, &failed);
-    let (stop, error) = (&stop, &error);
+    let (work, progress, writers, failed, error) = (&work, &progress, &writers, &failed, &error);
+    let stopped = || error.lock().unwrap_or_else(std::sync::PoisonError::into_inner).is_some();
     rayon::scope_fifo(|s| {
         for &(b, seq, obj) in &todo {
             s.spawn_fifo(move |_| {
-                if stop.load(Ordering::Relaxed) {
+                if stopped() {
                     return;
                 }
                 let outcome = work(b, obj);
@@ -279,7 +279,6 @@ where
                 progress(b, obj, &outcome);
                 let mut w = writers[b].lock().unwrap_or_else(std::sync::PoisonError::into_inner);
                 if let Err(e) = w.push(seq, outcome.line) {
-                    stop.store(true, Ordering::Relaxed);
                     error.lock().unwrap_or_else(std::sync::PoisonError::into_inner).get_or_insert(e);
                 }
             });

@@ -386,13 +386,19 @@ pub fn run_plans(
     // it), and dropped when the last of them is done: the mesh, the ground truth, the observable
     // reference and the targets' indexes are not rebuilt per episode, and no two episodes build
     // the same reference at once.
-    let mut shared: HashMap<String, SharedScene> = HashMap::new();
+    // Each key is computed once, here: per plan, the shared scene of each object to run.
+    let mut by_key: HashMap<String, Arc<SharedScene>> = HashMap::new();
+    let mut scene_of: Vec<HashMap<&str, Arc<SharedScene>>> = Vec::with_capacity(plans.len());
     for (plan, ex) in plans.iter().zip(&existing) {
+        let mut of_plan = HashMap::new();
         for obj in plan.objects.iter().filter(|o| !ex.done.contains(&o.uid)) {
             if let Some(key) = plan.scene_key(obj) {
-                shared.entry(key).or_default().left.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let sh = by_key.entry(key).or_default();
+                sh.left.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                of_plan.insert(obj.uid.as_str(), sh.clone());
             }
         }
+        scene_of.push(of_plan);
     }
     let busy: Vec<std::sync::Mutex<f64>> = plans.iter().map(|_| std::sync::Mutex::new(0.0)).collect();
     let summaries = pool.install(|| {
@@ -412,7 +418,7 @@ pub fn run_plans(
             |b, obj| {
                 let t = Instant::now();
                 let plan = &plans[b];
-                let outcome = match plan.scene_key(obj).and_then(|k| shared.get(&k)) {
+                let outcome = match scene_of[b].get(obj.uid.as_str()) {
                     Some(sh) => {
                         let scene = sh.get(|| plan.scene(obj));
                         let res = scene.and_then(|scene| plan.episode_on(scene, planners, &records[b]));

@@ -46,9 +46,10 @@
 //!   branch-free loop before the data-dependent updates, and the second pass computes each
 //!   tile's ray set-ups (direction, reciprocals, grid-box entry/exit, start cell) before its
 //!   walks, so that the sqrt/division chains of different voxels and rays overlap; the first
-//!   loop and the set-ups' square roots and divisions run in structure-of-arrays loops that
-//!   vectorize (4 rays per vector square root or division, each lane rounded as the scalar
-//!   operation: ≈1–2% of a view on the mug, 2026-12-05); same operations on the same values;
+//!   loop vectorizes, and so do the set-ups' square roots and divisions, which run in
+//!   structure-of-arrays loops (4 rays per vector square root or division, each lane rounded as
+//!   the scalar operation: ≈1–2% of a view on the mug, 2026-12-05); same operations on the same
+//!   values;
 //! - on x86-64 CPUs with AVX2 and POPCNT (detected at run time) the same code is compiled for
 //!   them (wider vectors, hardware popcount in the rank lookups); FMA is not enabled, so every
 //!   IEEE operation and rounding is the same.

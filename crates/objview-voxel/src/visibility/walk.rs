@@ -84,10 +84,10 @@ impl InverseCaster<'_> {
     }
 
     /// The set-up of [`InverseCaster::cast`] for `ray` (whose `d`, `t_lo` and reciprocals
-    /// `s = 1/|d|` are set): its octant, `|d|`, grid-box entry and exit times, start time and start cell. The
-    /// start is meaningful only for a ray that `cast` walks (no zero or NaN direction
-    /// component, not rejected by the entry/exit tests); for any other it is some in-range
-    /// cell, unused.
+    /// `s = 1/|d|` are set): its octant, `|d|`, grid-box entry and exit times, start time and
+    /// start cell. The start is meaningful only for a ray that `cast` walks (no zero or NaN
+    /// direction component, not rejected by the entry/exit tests); for any other it is some
+    /// in-range cell, unused.
     #[inline(always)]
     pub(super) fn ray_start(&self, octants: &[Octant<'_>; 8], ray: &mut Ray, inv_r: f64) {
         let (d, s) = (ray.d, ray.s);

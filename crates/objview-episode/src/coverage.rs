@@ -260,7 +260,7 @@ impl Coverage {
             let (old, old_nn) = (self.d2[iu], self.nn[iu]);
             if let Some(fb) = own_block {
                 let k = domain.key(p);
-                let s = fb.cells[local_index(k)];
+                let s = fb.slot(local_index(k));
                 if s != NONE && max_corner_d2(domain.h, k, p) < self.retire2 {
                     let d2 = dist2(p, fused.pos[s as usize]);
                     out.push(Change { target: i, d2, nn: s, retire: true });

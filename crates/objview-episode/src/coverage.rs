@@ -47,7 +47,15 @@ struct Index {
     pts: Vec<[f64; 3]>,
     /// Per target block: its block key and the range of its points.
     blocks: Vec<([i32; 3], u32, u32)>,
+    /// Per point: the local index of its own fine voxel, with [`OWN_RETIRES`] set when that
+    /// voxel lies entirely within τ_min of it (less the margin), so that an update need not
+    /// compute the point's key again (three divisions and floors per live target and step).
+    own: Vec<u16>,
 }
+
+/// The flag of [`Index::own`]: the point's own voxel, once occupied, retires it.
+const OWN_RETIRES: u16 = 1 << 15;
+const _: () = assert!(crate::grid::BLOCK_CELLS <= OWN_RETIRES as usize);
 
 /// Per-worker buffers of [`Coverage::block_changes`], kept across target blocks.
 #[derive(Default)]
@@ -118,14 +126,23 @@ impl Coverage {
         let t2: Vec<f64> = taus.iter().map(|t| t * t).collect();
         let r2 = t2.iter().cloned().fold(0.0, f64::max);
         let tmin2 = t2.iter().cloned().fold(f64::INFINITY, f64::min);
+        let retire2 = tmin2 - RETIRE_MARGIN2;
+        let own = pts
+            .iter()
+            .map(|&p| {
+                let k = domain.key(p);
+                let flag = if max_corner_d2(domain.h, k, p) < retire2 { OWN_RETIRES } else { 0 };
+                local_index(k) as u16 | flag
+            })
+            .collect();
         Ok(Coverage {
             live_blocks: (0..blocks.len() as u32).collect(),
-            ix: Arc::new(Index { domain, pts, blocks }),
+            ix: Arc::new(Index { domain, pts, blocks, own }),
             counts: vec![0; t2.len()],
             t2,
             r2,
             tmin2,
-            retire2: tmin2 - RETIRE_MARGIN2,
+            retire2,
             d2: vec![f64::INFINITY; n],
             nn: vec![NONE; n],
             live,
@@ -259,12 +276,14 @@ impl Coverage {
             let p = self.ix.pts[iu];
             let (old, old_nn) = (self.d2[iu], self.nn[iu]);
             if let Some(fb) = own_block {
-                let k = domain.key(p);
-                let s = fb.slot(local_index(k));
-                if s != NONE && max_corner_d2(domain.h, k, p) < self.retire2 {
-                    let d2 = dist2(p, fused.pos[s as usize]);
-                    out.push(Change { target: i, d2, nn: s, retire: true });
-                    continue;
+                let own = self.ix.own[iu];
+                if own & OWN_RETIRES != 0 {
+                    let s = fb.slot((own & !OWN_RETIRES) as usize);
+                    if s != NONE {
+                        let d2 = dist2(p, fused.pos[s as usize]);
+                        out.push(Change { target: i, d2, nn: s, retire: true });
+                        continue;
+                    }
                 }
             }
             let moved = old_nn != NONE && fused.stamp[old_nn as usize] == epoch;

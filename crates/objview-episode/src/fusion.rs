@@ -334,13 +334,7 @@ impl FusedCloud {
         let mut fresh = std::mem::take(&mut self.fresh);
         fresh.clear();
         let mut start = 0usize;
-        for (ti, &t) in touched.iter().enumerate() {
-            // The next block's positions and slots are read soon: ask for them now.
-            if let Some(&u) = touched.get(ti + 1) {
-                let next = &self.blocks[u as usize];
-                prefetch_all(&next.centroids);
-                prefetch_all(&next.slots);
-            }
+        for &t in &touched {
             let blk = &mut self.blocks[t as usize];
             let end = blk.bucket as usize;
             blk.bucket = 0;
@@ -548,25 +542,6 @@ impl Bucketed for FusedCloud {
             self.blocks[t as usize].for_run(local_index(first), len, &mut f);
         });
     }
-}
-
-/// Asks the CPU to bring every cache line of `v` into the cache (a hint; no effect on
-/// results).
-#[inline(always)]
-fn prefetch_all<T>(v: &[T]) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        let bytes = std::mem::size_of_val(v);
-        let p = v.as_ptr() as *const i8;
-        let mut off = 0;
-        while off < bytes {
-            // SAFETY: a prefetch never faults, and `p + off` stays inside `v`.
-            unsafe { std::arch::x86_64::_mm_prefetch(p.add(off), std::arch::x86_64::_MM_HINT_T0) };
-            off += 64;
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = v;
 }
 
 /// [`FusedCloud::insert`] sorts its new voxels by first point when they are fewer than the

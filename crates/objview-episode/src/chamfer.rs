@@ -36,7 +36,7 @@
 use crate::fusion::FusedCloud;
 use crate::grid::{
     block_of, cell_of_key, dist2, key_runs, keyed_points, local_index, lower_best_over, nearest_in,
-    nearest_in_block, runs_in_box, Aabb, BlockSearch, Bucketed, ChangedBlocks, Domain, SuperGrid,
+    nearest_in_block, runs_in_box, Aabb, BlockSearch, Bucketed, ChangedBlocks, Domain, Slab, SuperGrid,
     BLOCK_CELLS, BLOCK_SHIFT, NONE,
 };
 use rayon::prelude::*;
@@ -58,6 +58,9 @@ struct TargetIndex {
     cell_start: Vec<[u32; BLOCK_CELLS + 1]>,
     /// The target blocks by superblock (far nearest searches).
     supergrid: SuperGrid,
+    /// Per target block: its slab for nearest searches ([`Bucketed::block_slab`]), made by
+    /// the first search that needs it (the points never change, so once per scene).
+    slabs: Vec<std::sync::OnceLock<Slab>>,
 }
 
 impl TargetIndex {
@@ -139,8 +142,9 @@ impl Targets {
             }
         }
         let n = pts.len();
+        let slabs = (0..cell_start.len()).map(|_| std::sync::OnceLock::new()).collect();
         Ok(Targets {
-            ix: std::sync::Arc::new(TargetIndex { domain, pts, table, cell_start, supergrid }),
+            ix: std::sync::Arc::new(TargetIndex { domain, pts, table, cell_start, supergrid, slabs }),
             d2: vec![f64::INFINITY; n],
             nn: vec![NONE; n],
             far: (0..n as u32).collect(),
@@ -949,6 +953,17 @@ impl Bucketed for Targets {
     }
     fn supergrid(&self) -> &SuperGrid {
         &self.ix.supergrid
+    }
+    fn block_slab(&self, b: [i32; 3], aabb: &Aabb) -> Option<Slab> {
+        let t = self.ix.table[self.ix.domain.block_index(b)?];
+        if t == NONE {
+            return None;
+        }
+        let ix = &self.ix;
+        Some(
+            *ix.slabs[t as usize]
+                .get_or_init(|| Slab::of_block(aabb, ix.domain.h, &ix.pts[ix.block_range(t)])),
+        )
     }
     #[inline]
     fn position(&self, index: u32) -> [f64; 3] {

@@ -8,9 +8,11 @@
 //! time) or moved (a voxel seen again). [`FusionDelta`] lists both: the coverage metrics update
 //! only around them.
 
+use std::sync::OnceLock;
+
 use crate::grid::{
-    block_of, local_index, lower_best_over, nearest_in, runs_in_box, voxel_runs, Bucketed, Domain, SuperGrid,
-    SuperHandle, BLOCK_CELLS, NONE,
+    block_of, local_index, lower_best_over, nearest_in, runs_in_box, voxel_runs, Aabb, Bucketed, Domain,
+    Slab, SuperGrid, SuperHandle, BLOCK_CELLS, NONE,
 };
 
 /// One allocated block: which of its fine voxels hold a fused point, and their slots and
@@ -41,6 +43,9 @@ pub struct FusedBlock {
     centroids: Vec<[f64; 3]>,
     /// Scratch of [`FusedCloud::insert`]: this insertion's point count, then offset.
     bucket: u32,
+    /// The block's slab for nearest searches ([`Bucketed::block_slab`]), made by the first
+    /// search that needs it; cleared when an insertion changes the block.
+    slab: OnceLock<Slab>,
 }
 
 impl FusedBlock {
@@ -54,6 +59,7 @@ impl FusedBlock {
             changed_bits: [0; BLOCK_CELLS / 64],
             centroids: Vec::new(),
             bucket: 0,
+            slab: OnceLock::new(),
         }
     }
 
@@ -339,6 +345,7 @@ impl FusedCloud {
             let end = blk.bucket as usize;
             blk.bucket = 0;
             blk.changed_bits = [0; BLOCK_CELLS / 64];
+            blk.slab = OnceLock::new();
             let scratch = &mut self.scratch;
             for &Sorted { p, i, li } in &order[start..end] {
                 let li = li as usize;
@@ -527,6 +534,10 @@ impl Bucketed for FusedCloud {
     }
     fn supergrid(&self) -> &SuperGrid {
         &self.supergrid
+    }
+    fn block_slab(&self, b: [i32; 3], aabb: &Aabb) -> Option<Slab> {
+        let blk = self.domain.block_index(b).and_then(|bi| self.block_at(bi))?;
+        Some(*blk.slab.get_or_init(|| Slab::of_block(aabb, self.domain.h, &blk.centroids)))
     }
     #[inline]
     fn position(&self, index: u32) -> [f64; 3] {
@@ -838,6 +849,48 @@ mod tests {
                     == latest.xyz[0][latest.slots.iter().position(|&q| q == s).unwrap()].to_bits()));
             }
         }
+    }
+
+    #[test]
+    fn a_blocks_kept_slab_bounds_its_points_and_follows_its_changes() {
+        // One block (0.04 wide at h = 0.005, key [1, 1, 1]) holding a tilted plane patch; a
+        // second insertion adds a patch on another plane and moves centroids, so the first
+        // slab no longer bounds the block: the kept one must be made again.
+        let d = Domain::covering(0.005, [-0.2; 3], [0.2; 3], 0.0);
+        let mut f = FusedCloud::new(d.clone());
+        let b = [1, 1, 1];
+        let lo = 0.04;
+        let plane = |tilt: f64, off: f64| -> Vec<[f64; 3]> {
+            let mut v = Vec::new();
+            for i in 0..40 {
+                for j in 0..40 {
+                    let (x, y) = (lo + 0.0005 + i as f64 * 0.00098, lo + 0.0005 + j as f64 * 0.00098);
+                    v.push([x, y, lo + off + tilt * (x - lo) + 0.3 * tilt * (y - lo)]);
+                }
+            }
+            v
+        };
+        let bounds_all = |f: &FusedCloud| {
+            let (aabb, slab) = f
+                .supergrid
+                .blocks(b.map(|x| x >> crate::grid::SUPER_SHIFT))
+                .iter()
+                .find(|(k, _)| *k == b)
+                .map(|(_, a)| (*a, f.block_slab(b, a).expect("an allocated block")))
+                .expect("the block is in the supergrid");
+            let mut n = 0;
+            f.for_block(b, |_, q| {
+                assert_eq!(slab.lb2(q), 0.0, "a point of the block outside its slab");
+                n += 1;
+            });
+            assert!(n > 20);
+            (aabb, slab)
+        };
+        f.insert(&plane(0.5, 0.005));
+        let (_, first) = bounds_all(&f);
+        assert!(first.lb2([lo + 0.02, lo + 0.02, lo + 0.039]) > 0.0, "the first slab is thin");
+        f.insert(&plane(-0.4, 0.03));
+        bounds_all(&f);
     }
 
     #[test]

@@ -171,6 +171,13 @@ pub trait Bucketed {
     fn lower_best_in_block(&self, b: [i32; 3], p: [f64; 3], best: &mut (f64, u32)) {
         self.for_block(b, |i, q| lower_best(best, dist2(p, q), i));
     }
+    /// The slab of the block with block key `b` and box `aabb` (its box in
+    /// [`Bucketed::supergrid`]) when the store keeps one per block, made at most once while the
+    /// block is unchanged; `None` (the default): the search makes its own. Any valid slab gives
+    /// the same answers: it only bounds.
+    fn block_slab(&self, _b: [i32; 3], _aabb: &Aabb) -> Option<Slab> {
+        None
+    }
 }
 
 /// The scans' comparison: point `i` at squared distance `d` replaces `best` (`(d², index)`)
@@ -376,7 +383,7 @@ impl SuperGrid {
     }
 
     /// The occupied blocks of superblock key `s` with their boxes (empty outside the grid).
-    fn blocks(&self, s: [i32; 3]) -> &[([i32; 3], Aabb)] {
+    pub(crate) fn blocks(&self, s: [i32; 3]) -> &[([i32; 3], Aabb)] {
         self.index(s).map_or(&[], |i| &self.lists[i])
     }
 
@@ -586,8 +593,11 @@ pub struct BlockSearch {
 /// slab is thin, and this bound is far tighter than the block's box for points that lie far
 /// off the surface (the inside of a sealed shell), which otherwise scan every block whose box
 /// reaches within their distance.
+///
+/// A store that keeps one per block ([`Bucketed::block_slab`]) makes it at most once while the
+/// block is unchanged; otherwise each block search makes its own.
 #[derive(Debug, Clone, Copy)]
-struct Slab {
+pub struct Slab {
     n: [f64; 3],
     c: [f64; 3],
     t: f64,
@@ -643,7 +653,7 @@ impl Slab {
     /// or [`Slab::NONE`] where the box is thin along an axis (a patch of an axis-aligned face:
     /// the box already bounds as well as a slab could; the points are then not copied).
     fn of_box(aabb: &Aabb, h: f64, buf: &mut Vec<[f64; 3]>, fill: impl FnOnce(&mut Vec<[f64; 3]>)) -> Slab {
-        if (0..3).any(|a| aabb.hi[a] - aabb.lo[a] < 0.25 * h) {
+        if Slab::box_is_thin(aabb, h) {
             return Slab::NONE;
         }
         buf.clear();
@@ -651,11 +661,24 @@ impl Slab {
         Slab::of_points(buf).unwrap_or(Slab::NONE)
     }
 
+    /// [`Slab::of_box`] of a block whose points are `pts` (contiguous in its store).
+    pub(crate) fn of_block(aabb: &Aabb, h: f64, pts: &[[f64; 3]]) -> Slab {
+        if Slab::box_is_thin(aabb, h) {
+            return Slab::NONE;
+        }
+        Slab::of_points(pts).unwrap_or(Slab::NONE)
+    }
+
+    /// Whether `aabb` is thinner than h/4 along an axis.
+    fn box_is_thin(aabb: &Aabb, h: f64) -> bool {
+        (0..3).any(|a| aabb.hi[a] - aabb.lo[a] < 0.25 * h)
+    }
+
     /// A lower bound of d² from `p` to every point of the slab's block. Rounding: the dot
     /// products err by far less than the margin taken off (1e-9 of the coordinates' scale, and
     /// |n| may exceed 1 by an ulp), so the bound never exceeds a true distance.
     #[inline]
-    fn lb2(&self, p: [f64; 3]) -> f64 {
+    pub(crate) fn lb2(&self, p: [f64; 3]) -> f64 {
         let s =
             self.n[0] * (p[0] - self.c[0]) + self.n[1] * (p[1] - self.c[1]) + self.n[2] * (p[2] - self.c[2]);
         let d = (s.abs() - self.t) * (1.0 - 1e-9) - 1e-9;
@@ -750,7 +773,11 @@ pub fn nearest_in_block<S: Bucketed>(
             }
             // The block's slab, made when a point first scans it.
             let slab = scratch.slabs[c].get_or_insert_with(|| {
-                Slab::of_box(aabb, domain.h, &mut scratch.buf, |buf| set.for_block(*b, |_, q| buf.push(q)))
+                set.block_slab(*b, aabb).unwrap_or_else(|| {
+                    Slab::of_box(aabb, domain.h, &mut scratch.buf, |buf| {
+                        set.for_block(*b, |_, q| buf.push(q))
+                    })
+                })
             });
             if slab.lb2(p) >= best.0 {
                 continue;

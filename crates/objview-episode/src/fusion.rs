@@ -15,6 +15,13 @@ use crate::grid::{
     Slab, SuperGrid, SuperHandle, BLOCK_CELLS, NONE,
 };
 
+/// The set bits of `word` below bit `b` (< 64): a voxel's place among the occupied voxels of
+/// its occupancy word.
+#[inline(always)]
+fn ones_below(word: u64, b: u32) -> usize {
+    (word & ((1u64 << b) - 1)).count_ones() as usize
+}
+
 /// One allocated block: which of its fine voxels hold a fused point, and their slots and
 /// positions, by local index.
 ///
@@ -72,8 +79,8 @@ impl FusedBlock {
     /// The position in `slots` of local index `li`: the occupied voxels before it.
     #[inline]
     fn rank(&self, li: usize) -> usize {
-        let (w, b) = (li >> 6, li & 63);
-        self.before[w] as usize + (self.occupied[w] & ((1u64 << b) - 1)).count_ones() as usize
+        let w = li >> 6;
+        self.before[w] as usize + ones_below(self.occupied[w], (li & 63) as u32)
     }
 
     /// The slot of fine voxel `li` (local index), or [`NONE`].
@@ -97,12 +104,27 @@ impl FusedBlock {
         if bits == 0 {
             return;
         }
-        let mut j = self.before[w] as usize + (word & ((1u64 << b) - 1)).count_ones() as usize;
+        let mut j = self.before[w] as usize + ones_below(word, b as u32);
         while bits != 0 {
             f(self.slots[j], self.centroids[j]);
             j += 1;
             bits &= bits - 1;
         }
+    }
+
+    /// The places in `slots` and `centroids` of the voxels the latest insertion that touched
+    /// the block changed (created or moved), in local-index order.
+    fn changed_places(&self) -> impl Iterator<Item = usize> + '_ {
+        self.changed_bits.iter().zip(&self.occupied).zip(&self.before).flat_map(|((&bits, &word), &base)| {
+            let mut bits = bits;
+            std::iter::from_fn(move || {
+                (bits != 0).then(|| {
+                    let b = bits.trailing_zeros();
+                    bits &= bits - 1;
+                    base as usize + ones_below(word, b)
+                })
+            })
+        })
     }
 
     /// Marks the voxels `fresh` (local indices, ascending, none occupied yet) occupied and
@@ -378,7 +400,7 @@ impl FusedCloud {
                         fresh.push((first, t, li as u16, [a[0] / n, a[1] / n, a[2] / n]));
                         continue;
                     }
-                    let j = base + (occupied & ((1u64 << b) - 1)).count_ones() as usize;
+                    let j = base + ones_below(occupied, b);
                     let c = &mut blk.centroids[j];
                     *c = [(c[0] + a[0]) / (n + 1.0), (c[1] + a[1]) / (n + 1.0), (c[2] + a[2]) / (n + 1.0)];
                     let s = blk.slots[j] as usize;
@@ -435,17 +457,7 @@ impl FusedCloud {
         by_domain.sort_unstable();
         for &(_, t) in &by_domain {
             let blk = &self.blocks[t as usize];
-            for (w, &bits) in blk.changed_bits.iter().enumerate() {
-                let (occupied, base) = (blk.occupied[w], blk.before[w] as usize);
-                let mut bits = bits;
-                while bits != 0 {
-                    let b = bits.trailing_zeros();
-                    bits &= bits - 1;
-                    delta
-                        .changed
-                        .push(blk.slots[base + (occupied & ((1u64 << b) - 1)).count_ones() as usize]);
-                }
-            }
+            delta.changed.extend(blk.changed_places().map(|j| blk.slots[j]));
         }
         self.latest = by_domain;
         self.at = at;
@@ -459,18 +471,7 @@ impl FusedCloud {
     pub fn latest_changes(&self, mut f: impl FnMut([i32; 3], &mut dyn Iterator<Item = (u32, [f64; 3])>)) {
         for &(_, t) in &self.latest {
             let blk = &self.blocks[t as usize];
-            let mut it = blk.changed_bits.iter().enumerate().flat_map(move |(w, &bits)| {
-                let mut bits = bits;
-                std::iter::from_fn(move || {
-                    (bits != 0).then(|| {
-                        let li = (w << 6) | bits.trailing_zeros() as usize;
-                        bits &= bits - 1;
-                        let j = blk.rank(li);
-                        (blk.slots[j], blk.centroids[j])
-                    })
-                })
-            });
-            f(blk.key, &mut it);
+            f(blk.key, &mut blk.changed_places().map(|j| (blk.slots[j], blk.centroids[j])));
         }
     }
 

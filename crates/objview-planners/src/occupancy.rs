@@ -159,7 +159,9 @@ pub enum VoxelState {
     Occupied,
 }
 
-/// Per-frame cell marks (the merge keeps the maximum: occupied wins over free).
+/// Per-frame cell marks, as bits ORed together (the merge ORs too): a cell with
+/// [`MARK_OCCUPIED`] set is occupied whatever else passed through it, else one with
+/// [`MARK_FREE`] is free.
 const MARK_NONE: u8 = 0;
 const MARK_FREE: u8 = 1;
 const MARK_OCCUPIED: u8 = 2;
@@ -553,13 +555,12 @@ impl OccupancyGrid {
             .fold(
                 || (vec![MARK_NONE; geom.len()], 0usize),
                 |(mut marks, mut rays), (v, row)| {
-                    for (u, &z) in row.iter().enumerate() {
-                        if z.is_finite() && z > 0.0 {
-                            let end = camera.unproject(u as u32, v as u32, z as f64);
-                            mark_segment(geom, &mut marks, origin, end);
+                    let ends =
+                        row.iter().enumerate().filter(|(_, &z)| z.is_finite() && z > 0.0).map(|(u, &z)| {
                             rays += 1;
-                        }
-                    }
+                            camera.unproject(u as u32, v as u32, z as f64)
+                        });
+                    mark_segments(geom, &mut marks, origin, ends);
                     (marks, rays)
                 },
             )
@@ -576,9 +577,7 @@ impl OccupancyGrid {
             .fold(
                 || (vec![MARK_NONE; geom.len()], 0usize),
                 |(mut marks, rays), chunk| {
-                    for &end in chunk {
-                        mark_segment(geom, &mut marks, origin, end);
-                    }
+                    mark_segments(geom, &mut marks, origin, chunk.iter().copied());
                     (marks, rays + chunk.len())
                 },
             )
@@ -589,16 +588,14 @@ impl OccupancyGrid {
     fn apply_marks(&mut self, marks: &[u8], rays: usize) -> InsertStats {
         let mut stats = InsertStats { rays, ..InsertStats::default() };
         for (l, &m) in self.log_odds.iter_mut().zip(marks) {
-            let delta = match m {
-                MARK_FREE => {
-                    stats.free_cells += 1;
-                    self.l_miss
-                }
-                MARK_OCCUPIED => {
-                    stats.occupied_cells += 1;
-                    self.l_hit
-                }
-                _ => continue,
+            let delta = if m & MARK_OCCUPIED != 0 {
+                stats.occupied_cells += 1;
+                self.l_hit
+            } else if m & MARK_FREE != 0 {
+                stats.free_cells += 1;
+                self.l_miss
+            } else {
+                continue;
             };
             *l = (*l + delta).clamp(self.l_min, self.l_max);
         }
@@ -630,13 +627,89 @@ where
 
 fn merge_marks(mut a: (Vec<u8>, usize), b: (Vec<u8>, usize)) -> (Vec<u8>, usize) {
     for (x, &y) in a.0.iter_mut().zip(&b.0) {
-        *x = (*x).max(y);
+        *x |= y;
     }
     (a.0, a.1 + b.1)
 }
 
+/// Rays walked at once by [`mark_segments`].
+const LANES: usize = 8;
+
+/// One ray of [`mark_segments`]: its walk and its end point's cell.
+struct Lane<'a> {
+    dda: Dda<'a>,
+    end: Option<usize>,
+}
+
+/// [`mark_segment`] for every segment origin → end of `ends`, [`LANES`] walks interleaved.
+///
+/// A walk is a chain of dependent steps (each crossing time decides the next axis), so one walk
+/// at a time leaves the core waiting on that chain; independent walks side by side overlap.
+/// Every walk visits exactly the cells of its own [`Dda`], and the marks are ORed, so the result
+/// does not depend on the order in which the walks' cells are marked.
+fn mark_segments(
+    g: &GridGeometry,
+    marks: &mut [u8],
+    origin: [f64; 3],
+    mut ends: impl Iterator<Item = [f64; 3]>,
+) {
+    let n = g.n as i64;
+    let mut lanes: [Option<Lane>; LANES] = std::array::from_fn(|_| None);
+    let mut live = 0usize;
+    let mut more = true;
+    loop {
+        if more && live < LANES {
+            for slot in lanes.iter_mut().filter(|l| l.is_none()) {
+                // The next segment that enters the cube (the others only mark their end).
+                *slot = loop {
+                    let Some(end) = ends.next() else {
+                        more = false;
+                        break None;
+                    };
+                    let d = [end[0] - origin[0], end[1] - origin[1], end[2] - origin[2]];
+                    let end_idx = g.voxel_of(end).map(|ijk| g.index(ijk));
+                    match Dda::new(g, origin, d, 0.0, 1.0) {
+                        Some(dda) => break Some(Lane { dda, end: end_idx }),
+                        None => {
+                            if let Some(e) = end_idx {
+                                marks[e] |= MARK_OCCUPIED;
+                            }
+                        }
+                    }
+                };
+                if slot.is_none() {
+                    break;
+                }
+                live += 1;
+            }
+        }
+        if live == 0 {
+            return;
+        }
+        for slot in lanes.iter_mut() {
+            let Some(lane) = slot else { continue };
+            let idx = lane.dda.idx as usize;
+            let done = if Some(idx) == lane.end {
+                true
+            } else {
+                marks[idx] |= MARK_FREE;
+                !lane.dda.advance(n)
+            };
+            if done {
+                if let Some(e) = lane.end {
+                    marks[e] |= MARK_OCCUPIED;
+                }
+                *slot = None;
+                live -= 1;
+            }
+        }
+    }
+}
+
 /// Marks the cells of the segment origin → end: the traversed cells before the end point's cell
-/// free, the end point's cell (when inside the cube) occupied.
+/// free, the end point's cell (when inside the cube) occupied. One segment at a time, as the
+/// marks were made before [`mark_segments`] (kept as the tests' reference).
+#[cfg(test)]
 fn mark_segment(g: &GridGeometry, marks: &mut [u8], origin: [f64; 3], end: [f64; 3]) {
     let d = [end[0] - origin[0], end[1] - origin[1], end[2] - origin[2]];
     let end_idx = g.voxel_of(end).map(|ijk| g.index(ijk));
@@ -883,6 +956,92 @@ mod tests {
         assert_eq!(g.geometry().voxel, 0.1);
         assert_eq!(g.geometry().voxel_of([0.95, 0.0, 1.0]), Some([9, 0, 9]));
         assert_eq!(g.geometry().voxel_of([-0.01, 0.5, 0.5]), None);
+    }
+
+    /// The marks of one segment at a time in order (the insertion before the interleaved
+    /// walks): free where a walk passed a cell still unmarked, occupied at each end cell.
+    fn marks_one_at_a_time(g: &GridGeometry, origin: [f64; 3], ends: &[[f64; 3]]) -> Vec<u8> {
+        let mut marks = vec![MARK_NONE; g.len()];
+        for &end in ends {
+            mark_segment(g, &mut marks, origin, end);
+        }
+        marks
+    }
+
+    fn classify(m: u8) -> u8 {
+        if m & MARK_OCCUPIED != 0 {
+            MARK_OCCUPIED
+        } else {
+            m & MARK_FREE
+        }
+    }
+
+    #[test]
+    fn interleaved_walks_mark_exactly_the_cells_of_one_walk_at_a_time() {
+        let geom = grid().geometry().clone();
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        // Segments from outside, from inside, ending inside or outside the cube, missing it,
+        // along axes and through cell corners (ties between axes), in random counts so that
+        // the lanes refill at every phase.
+        for case in 0..40 {
+            let origin: [f64; 3] = if case % 4 == 0 {
+                std::array::from_fn(|_| rng.gen_range(-0.9..0.9))
+            } else {
+                Pose::from_direction(
+                    [rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)],
+                    3.0,
+                )
+                .center
+            };
+            let count = rng.gen_range(0..60);
+            let ends: Vec<[f64; 3]> = (0..count)
+                .map(|k| match k % 5 {
+                    0 => std::array::from_fn(|_| rng.gen_range(-1.5..1.5)),
+                    1 => geom.center(std::array::from_fn(|_| rng.gen_range(0..64))),
+                    2 => [geom.plane(rng.gen_range(0..65)), geom.plane(rng.gen_range(0..65)), origin[2]],
+                    3 => [origin[0] - 6.0, origin[1] + 0.01, origin[2]],
+                    _ => std::array::from_fn(|_| rng.gen_range(-1.0..1.0)),
+                })
+                .collect();
+            let expected = marks_one_at_a_time(&geom, origin, &ends);
+            let mut got = vec![MARK_NONE; geom.len()];
+            mark_segments(&geom, &mut got, origin, ends.iter().copied());
+            for (idx, (&m, &want)) in got.iter().zip(&expected).enumerate() {
+                assert_eq!(classify(m), want, "case {case}, cell {idx}");
+            }
+        }
+        // A real frame: every cell of the grid as the one-at-a-time walks leave it.
+        let mesh = objview_render::bench::icosphere(3);
+        let cam = Camera::new(Pose::from_direction([1.0, 0.3, 0.5], 3.0), Intrinsics::default());
+        let frame = objview_render::render(&mesh, &cam);
+        let k = cam.intrinsics;
+        let ends: Vec<[f64; 3]> = (0..k.height)
+            .flat_map(|v| (0..k.width).map(move |u| (u, v)))
+            .filter_map(|(u, v)| {
+                let z = frame.depth[(v * k.width + u) as usize];
+                (z.is_finite() && z > 0.0).then(|| cam.unproject(u, v, z as f64))
+            })
+            .collect();
+        let expected = marks_one_at_a_time(&geom, cam.center, &ends);
+        let mut g = grid();
+        let stats = g.insert_depth(&cam, &frame.depth).unwrap();
+        let (mut free, mut occupied) = (0, 0);
+        for (idx, &m) in expected.iter().enumerate() {
+            let want = match m {
+                MARK_OCCUPIED => {
+                    occupied += 1;
+                    g.l_hit
+                }
+                MARK_FREE => {
+                    free += 1;
+                    g.l_miss
+                }
+                _ => 0.0,
+            };
+            assert_eq!(g.log_odds()[idx].to_bits(), want.to_bits(), "cell {idx}");
+        }
+        assert!(occupied > 100 && free > 10_000, "{occupied} occupied, {free} free");
+        assert_eq!((stats.free_cells, stats.occupied_cells), (free, occupied));
     }
 
     #[test]

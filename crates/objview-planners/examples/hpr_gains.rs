@@ -45,7 +45,9 @@ fn main() {
         let t = Instant::now();
         let gains: Vec<usize> = cameras.iter().map(|&c| ws.count(&points, c)).collect();
         times.push(t.elapsed().as_secs_f64());
-        checksum = gains.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &g| (h ^ g as u64).wrapping_mul(0x1000_0000_01b3));
+        checksum = gains
+            .iter()
+            .fold(0xcbf2_9ce4_8422_2325u64, |h, &g| (h ^ g as u64).wrapping_mul(0x1000_0000_01b3));
     }
     times.sort_by(f64::total_cmp);
     println!(

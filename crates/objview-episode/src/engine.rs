@@ -20,7 +20,7 @@ use objview_views::ViewSpace;
 use crate::chamfer::Targets;
 use crate::coverage::Coverage;
 use crate::fusion::FusedCloud;
-use crate::grid::{ChangedBlocks, Domain};
+use crate::grid::{ChangedBlocks, Domain, BLOCK_SHIFT};
 use crate::metrics;
 use crate::planner::{Action, Environment, EpisodeContext, Observation, OracleAccess, Planner};
 use crate::reference::Reference;
@@ -200,10 +200,16 @@ impl Episode {
             .map_err(|e| EpisodeError::Settings(format!("start pose {:?}: {e}", start_pose.to_array())))?;
         let fresh = scene.fresh_targets(&settings.taus)?;
         let h = settings.fusion_voxel;
+        // The fused cloud's fine keys lie in its domain's blocks (any outside are still counted).
+        let dom = &scene.domain;
+        let fine_lo = dom.lo.map(|b| b << BLOCK_SHIFT);
+        let fine_hi: [i32; 3] = std::array::from_fn(|a| ((dom.lo[a] + dom.dims[a]) << BLOCK_SHIFT) - 1);
         let ms = settings
             .ms_deltas
             .iter()
-            .map(|&d| Stabilization::new(d, h, settings.ms_growth, settings.ms_stable_steps))
+            .map(|&d| {
+                Stabilization::with_box(d, h, settings.ms_growth, settings.ms_stable_steps, fine_lo, fine_hi)
+            })
             .collect();
         let mut ks = settings.checkpoint_ks.clone();
         if let (Budget::Fixed(k), ExecutionMode::Iterative) = (budget, method.mode) {

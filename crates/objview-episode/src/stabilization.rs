@@ -11,6 +11,36 @@ use rustc_hash::FxHashSet;
 
 /// Entries of the recent-key cache of [`Stabilization::add_fine_keys`].
 const RECENT: usize = 256;
+/// Largest dense δ-voxel box of [`Stabilization::with_box`], in voxels (8 MiB of bits).
+const DENSE_MAX: usize = 1 << 26;
+
+/// The δ-voxels of a fixed key box as one bit each: the set's common case without hashing.
+#[derive(Debug, Clone)]
+struct Dense {
+    lo: [i32; 3],
+    dims: [usize; 3],
+    bits: Vec<u64>,
+    count: usize,
+}
+
+impl Dense {
+    /// Adds `d` when it lies in the box (true then, whether it was new or not).
+    #[inline]
+    fn insert(&mut self, d: [i32; 3]) -> bool {
+        let mut i = 0usize;
+        for ((&x, &lo), &n) in d.iter().zip(&self.lo).zip(&self.dims) {
+            let x = x.wrapping_sub(lo) as u32 as usize;
+            if x >= n {
+                return false;
+            }
+            i = i * n + x;
+        }
+        let (w, b) = (i >> 6, 1u64 << (i & 63));
+        self.count += usize::from(self.bits[w] & b == 0);
+        self.bits[w] |= b;
+        true
+    }
+}
 
 /// The cache entry of δ-voxel key `d`.
 #[inline]
@@ -33,6 +63,9 @@ pub struct Stabilization {
     ratio: Option<i32>,
     h: f64,
     voxels: FxHashSet<[i32; 3]>,
+    /// The δ-voxels inside the box given to [`Stabilization::with_box`] (then `voxels` holds
+    /// only those outside it).
+    dense: Option<Dense>,
     /// Direct-mapped cache of keys known to be in `voxels` (see [`Stabilization::add_fine_keys`]).
     recent: Box<[Option<[i32; 3]>; RECENT]>,
     prev: Option<usize>,
@@ -52,6 +85,7 @@ impl Stabilization {
             ratio,
             h,
             voxels: FxHashSet::default(),
+            dense: None,
             recent: Box::new([None; RECENT]),
             prev: None,
             run: 0,
@@ -59,16 +93,51 @@ impl Stabilization {
         }
     }
 
+    /// [`Stabilization::new`] with the δ-voxels of the fine keys in `[fine_lo, fine_hi]` (the
+    /// fused cloud's domain) kept as a dense bitset instead of hashed: the same set and count
+    /// (keys outside the box still go to the hash set), without a hash insertion per new point.
+    /// No dense box when it would exceed [`DENSE_MAX`] voxels.
+    pub fn with_box(
+        delta: f64,
+        h: f64,
+        growth_threshold: f64,
+        stable_steps: usize,
+        fine_lo: [i32; 3],
+        fine_hi: [i32; 3],
+    ) -> Stabilization {
+        let mut s = Stabilization::new(delta, h, growth_threshold, stable_steps);
+        // The δ-key map is monotone per axis, so the box's corners bound it.
+        let (lo, hi) = (s.delta_key(fine_lo), s.delta_key(fine_hi));
+        let dims: [usize; 3] =
+            std::array::from_fn(|a| (i64::from(hi[a]) - i64::from(lo[a]) + 1).max(0) as usize);
+        let n = dims.iter().try_fold(1usize, |n, &d| n.checked_mul(d));
+        if let Some(n) = n.filter(|&n| n > 0 && n <= DENSE_MAX) {
+            s.dense = Some(Dense { lo, dims, bits: vec![0; n.div_ceil(64)], count: 0 });
+        }
+        s
+    }
+
+    /// The δ-voxel of fine voxel `k` (module docs).
+    #[inline]
+    fn delta_key(&self, k: [i32; 3]) -> [i32; 3] {
+        match self.ratio {
+            Some(m) => [k[0].div_euclid(m), k[1].div_euclid(m), k[2].div_euclid(m)],
+            None => {
+                let c = |x: i32| floor_i32(((x as f64 + 0.5) * self.h) / self.delta);
+                [c(k[0]), c(k[1]), c(k[2])]
+            }
+        }
+    }
+
     /// Adds the fine voxels of newly created fused points.
     pub fn add_fine_keys(&mut self, keys: impl IntoIterator<Item = [i32; 3]>) {
         for k in keys {
-            let d = match self.ratio {
-                Some(m) => [k[0].div_euclid(m), k[1].div_euclid(m), k[2].div_euclid(m)],
-                None => {
-                    let c = |x: i32| floor_i32(((x as f64 + 0.5) * self.h) / self.delta);
-                    [c(k[0]), c(k[1]), c(k[2])]
+            let d = self.delta_key(k);
+            if let Some(dense) = &mut self.dense {
+                if dense.insert(d) {
+                    continue;
                 }
-            };
+            }
             // Keys arrive by block and voxel, so neighbours share δ-voxels: a small cache of
             // keys already in the set skips most repeated hash insertions (same set).
             let slot = &mut self.recent[recent_slot(d)];
@@ -81,12 +150,12 @@ impl Stabilization {
 
     /// Current δ-voxel count n.
     pub fn count(&self) -> usize {
-        self.voxels.len()
+        self.voxels.len() + self.dense.as_ref().map_or(0, |d| d.count)
     }
 
     /// Ends a step (after its voxels were added); returns true when MS@δ triggers now.
     pub fn end_step(&mut self, step: usize) -> bool {
-        self.observe(self.voxels.len(), step)
+        self.observe(self.count(), step)
     }
 
     /// The rule on a raw count sequence (one call per view).
@@ -155,8 +224,22 @@ mod tests {
     fn counts_equal_a_plain_set_of_the_delta_voxels() {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
-        for (delta, h) in [(0.02, 0.005), (0.012, 0.005), (0.005, 0.005)] {
-            let mut s = Stabilization::new(delta, h, 0.01, 3);
+        for (delta, h, boxed) in [
+            (0.02, 0.005, false),
+            (0.012, 0.005, false),
+            (0.005, 0.005, false),
+            (0.02, 0.005, true),
+            (0.012, 0.005, true),
+            (0.005, 0.005, true),
+            (0.03, 0.005, true),
+        ] {
+            // A box that holds most keys but not all (the rest go to the hash set).
+            let mut s = if boxed {
+                Stabilization::with_box(delta, h, 0.01, 3, [-30, -5, -3], [25, 9, 4])
+            } else {
+                Stabilization::new(delta, h, 0.01, 3)
+            };
+            assert_eq!(s.dense.is_some(), boxed);
             let mut plain = std::collections::HashSet::new();
             for _ in 0..50 {
                 // Runs of neighbouring keys (as fusion delivers them) and scattered repeats.
@@ -177,7 +260,7 @@ mod tests {
                     plain.insert(d);
                 }
                 s.add_fine_keys(keys);
-                assert_eq!(s.count(), plain.len(), "δ {delta}");
+                assert_eq!(s.count(), plain.len(), "δ {delta}, box {boxed}");
             }
         }
     }

@@ -96,7 +96,7 @@ impl Stabilization {
     /// [`Stabilization::new`] with the δ-voxels of the fine keys in `[fine_lo, fine_hi]` (the
     /// fused cloud's domain) kept as a dense bitset instead of hashed: the same set and count
     /// (keys outside the box still go to the hash set), without a hash insertion per new point.
-    /// No dense box when it would exceed [`DENSE_MAX`] voxels.
+    /// No dense box when it would exceed 2^26 voxels (8 MiB of bits).
     pub fn with_box(
         delta: f64,
         h: f64,

@@ -20,7 +20,7 @@ use objview_views::ViewSpace;
 use crate::chamfer::Targets;
 use crate::coverage::Coverage;
 use crate::fusion::FusedCloud;
-use crate::grid::{ChangedBlocks, Domain, BLOCK_SHIFT};
+use crate::grid::{ChangedBlocks, Domain};
 use crate::metrics;
 use crate::planner::{Action, Environment, EpisodeContext, Observation, OracleAccess, Planner};
 use crate::reference::Reference;
@@ -201,9 +201,7 @@ impl Episode {
         let fresh = scene.fresh_targets(&settings.taus)?;
         let h = settings.fusion_voxel;
         // The fused cloud's fine keys lie in its domain's blocks (any outside are still counted).
-        let dom = &scene.domain;
-        let fine_lo = dom.lo.map(|b| b << BLOCK_SHIFT);
-        let fine_hi: [i32; 3] = std::array::from_fn(|a| ((dom.lo[a] + dom.dims[a]) << BLOCK_SHIFT) - 1);
+        let (fine_lo, fine_hi) = scene.domain.key_box();
         let ms = settings
             .ms_deltas
             .iter()

@@ -67,6 +67,14 @@ impl Domain {
         keys_body(self.h, src, dst)
     }
 
+    /// The smallest and largest fine voxel keys of the domain's blocks (inclusive, per axis):
+    /// every key whose block is inside the domain lies in this box.
+    pub fn key_box(&self) -> ([i32; 3], [i32; 3]) {
+        let lo = self.lo.map(|b| b << BLOCK_SHIFT);
+        let hi = std::array::from_fn(|a| ((self.lo[a] + self.dims[a]) << BLOCK_SHIFT) - 1);
+        (lo, hi)
+    }
+
     /// Index of the block with block key `b`, if inside the domain.
     #[inline]
     pub fn block_index(&self, b: [i32; 3]) -> Option<usize> {
@@ -1126,6 +1134,24 @@ impl ChangedBlocks {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn key_box_is_the_keys_of_the_domain_blocks() {
+        let d = Domain::covering(0.005, [-1.0, -0.3, 0.2], [0.9, 0.4, 1.1], 0.1);
+        let (lo, hi) = d.key_box();
+        for a in 0..3 {
+            for (k, inside) in [(lo[a] - 1, false), (lo[a], true), (hi[a], true), (hi[a] + 1, false)] {
+                let mut key = lo;
+                key[a] = k;
+                assert_eq!(d.block_index(block_of(key)).is_some(), inside, "axis {a}, key {k}");
+            }
+        }
+        // Points of the covered box (margin included) key inside it.
+        for p in [[-1.1, -0.4, 0.1], [1.0, 0.5, 1.2], [0.0, 0.0, 0.5]] {
+            let k = d.key(p);
+            assert!((0..3).all(|a| lo[a] <= k[a] && k[a] <= hi[a]), "{p:?} → {k:?}");
+        }
+    }
 
     #[test]
     fn keys_into_equals_key_on_every_kind_of_coordinate() {

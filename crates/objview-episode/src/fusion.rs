@@ -11,8 +11,8 @@
 use std::sync::OnceLock;
 
 use crate::grid::{
-    block_of, local_index, lower_best_over, nearest_in, runs_in_box, voxel_runs, Aabb, Bucketed, Domain,
-    Slab, SuperGrid, SuperHandle, BLOCK_CELLS, NONE,
+    block_of, local_index, lower_best_over, nearest_in, runs_in_box, Aabb, Bucketed, Domain, Slab, SuperGrid,
+    SuperHandle, BLOCK_CELLS, NONE,
 };
 
 /// The set bits of `word` below bit `b` (< 64): a voxel's place among the occupied voxels of
@@ -567,25 +567,88 @@ const FRESH_SORT_SHARE: usize = 16;
 /// without its blocks, tables and slot bookkeeping. For callers that need one view's fused cloud
 /// as a point set (the oracle's per-candidate coverage).
 ///
-/// The points are grouped by voxel (`grid::voxel_runs`: key block index · 512 + local index),
-/// which orders the voxels by block and voxel and each voxel's points in input order.
+/// The points are grouped by block with a counting sort (the touched blocks put in domain
+/// order, each block's points kept in input order), then summed per voxel in a block-local
+/// table and emitted in local-index order: the order of sorting by (block index · 512 + local
+/// index, input index), without sorting the points.
 pub fn frame_centroids(domain: &Domain, points: &[[f64; 3]]) -> Vec<[f64; 3]> {
-    let grouped = voxel_runs(domain, points);
-    grouped
-        .runs
-        .iter()
-        .map(|&(_, a, b)| {
-            let mut s = [0.0f64; 3];
-            for &i in &grouped.order[a..b] {
-                let p = points[i as usize];
-                s[0] += p[0];
-                s[1] += p[1];
-                s[2] += p[2];
+    let mut keys = Vec::new();
+    domain.keys_into(points, &mut keys);
+    // Pass 1: each point's touched-block number and local index; the touched blocks' counts.
+    let mut number = vec![NONE; domain.num_blocks()];
+    let mut touched: Vec<(u32, u32)> = Vec::new(); // (domain block index, count)
+    let mut at: Vec<(u32, u16)> = Vec::with_capacity(points.len());
+    let mut last = (usize::MAX, NONE);
+    for &k in &keys {
+        let Some(b) = domain.block_index(block_of(k)) else {
+            at.push((NONE, 0));
+            continue;
+        };
+        let t = if b == last.0 {
+            last.1
+        } else {
+            let t = &mut number[b];
+            if *t == NONE {
+                *t = touched.len() as u32;
+                touched.push((b as u32, 0));
             }
-            let n = (b - a) as f64;
-            [s[0] / n, s[1] / n, s[2] / n]
-        })
-        .collect()
+            last = (b, *t);
+            *t
+        };
+        touched[t as usize].1 += 1;
+        at.push((t, local_index(k) as u16));
+    }
+    // Blocks in domain order: each block's start offset, by touched-block number.
+    let mut by_domain: Vec<u32> = (0..touched.len() as u32).collect();
+    by_domain.sort_unstable_by_key(|&t| touched[t as usize].0);
+    let mut next = vec![0u32; touched.len()];
+    let mut offset = 0u32;
+    for &t in &by_domain {
+        next[t as usize] = offset;
+        offset += touched[t as usize].1;
+    }
+    let mut order: Vec<(u16, u32)> = vec![(0, 0); offset as usize];
+    for (i, &(t, li)) in at.iter().enumerate() {
+        if t != NONE {
+            let o = &mut next[t as usize];
+            order[*o as usize] = (li, i as u32);
+            *o += 1;
+        }
+    }
+    // Pass 2, block by block: sums per voxel in input order, then the centroids by voxel.
+    let mut sums = vec![([0.0f64; 3], 0u32); BLOCK_CELLS];
+    let mut out = Vec::new();
+    let mut start = 0usize;
+    for &t in &by_domain {
+        let end = start + touched[t as usize].1 as usize;
+        let mut seen = [0u64; BLOCK_CELLS / 64];
+        for &(li, i) in &order[start..end] {
+            let li = li as usize;
+            let (w, bit) = (li >> 6, 1u64 << (li & 63));
+            let a = &mut sums[li];
+            if seen[w] & bit == 0 {
+                seen[w] |= bit;
+                *a = ([0.0; 3], 0);
+            }
+            let p = points[i as usize];
+            a.0[0] += p[0];
+            a.0[1] += p[1];
+            a.0[2] += p[2];
+            a.1 += 1;
+        }
+        for (w, &bits) in seen.iter().enumerate() {
+            let mut bits = bits;
+            while bits != 0 {
+                let li = (w << 6) | bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let (s, c) = sums[li];
+                let n = c as f64;
+                out.push([s[0] / n, s[1] / n, s[2] / n]);
+            }
+        }
+        start = end;
+    }
+    out
 }
 
 #[cfg(test)]

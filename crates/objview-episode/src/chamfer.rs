@@ -635,6 +635,16 @@ mod tests {
 
     /// Random "views": patches of a sphere of radius 0.5 sampled densely, with jitter, so
     /// voxels are revisited and centroids move.
+    /// A sphere patch of `n` targets (seeded) in a domain over [−0.6, 0.6]³ at h = 0.005, with
+    /// its index (cap 0.01), and the generator to draw more from.
+    fn patch_targets(seed: u64, n: usize) -> (rand_chacha::ChaCha8Rng, Domain, Vec<[f64; 3]>, Targets) {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.05);
+        let tp = patch(&mut rng, n);
+        let t = Targets::new(domain.clone(), &tp, 0.01).unwrap();
+        (rng, domain, tp, t)
+    }
+
     fn patch(rng: &mut rand_chacha::ChaCha8Rng, n: usize) -> Vec<[f64; 3]> {
         let c: [f64; 3] = [rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)];
         let cn = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
@@ -751,10 +761,7 @@ mod tests {
 
     #[test]
     fn mark_within_equals_brute_force() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
-        let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.05);
-        let tp = patch(&mut rng, 5000);
-        let t = Targets::new(domain, &tp, 0.01).unwrap();
+        let (mut rng, _, tp, t) = patch_targets(9, 5000);
         // Sparse points (mostly one per voxel) and dense ones around the targets (many per
         // voxel, as a fused view).
         let sparse = patch(&mut rng, 800);
@@ -786,10 +793,7 @@ mod tests {
     fn mark_within_in_block_order_skips_the_sort_and_marks_the_same() {
         // A fused view's centroids (listed by block, as the oracle passes them: the no-sort
         // path) and the same points reversed (the sorting path) mark what brute force marks.
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(33);
-        let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.05);
-        let tp = patch(&mut rng, 6000);
-        let t = Targets::new(domain.clone(), &tp, 0.01).unwrap();
+        let (mut rng, domain, tp, t) = patch_targets(33, 6000);
         let raw: Vec<[f64; 3]> = (0..30_000)
             .map(|_| {
                 let p = tp[rng.gen_range(0..tp.len())];
@@ -820,10 +824,7 @@ mod tests {
         // Random boxes (inside, across and beyond the domain's edges) over a sphere patch:
         // the filled runs hold exactly the targets of the box's runs, each run once, and
         // leave out the runs of rows without targets.
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(31);
-        let domain = Domain::covering(0.005, [-0.6; 3], [0.6; 3], 0.05);
-        let tp = patch(&mut rng, 20_000);
-        let t = Targets::new(domain, &tp, 0.01).unwrap();
+        let (mut rng, _, _, t) = patch_targets(31, 20_000);
         let ix = &t.ix;
         let (klo, khi) = ix.domain.key_box();
         let (mut nonempty_total, mut skipped) = (0, 0);

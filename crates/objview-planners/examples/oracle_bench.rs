@@ -18,18 +18,10 @@ use std::time::Instant;
 use objview_episode::fusion::frame_centroids;
 use objview_episode::{scene_domain, scene_from_parts, EpisodeSettings};
 use objview_geom::normalize::{normalize, Normalization};
+use objview_geom::stats::median;
 use objview_geom::synth;
 use objview_render::{Camera, Frame, Intrinsics, Renderer};
 use objview_views::{ViewSet, ViewSpace};
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    if v.is_empty() {
-        f64::NAN
-    } else {
-        v[v.len() / 2]
-    }
-}
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -96,7 +88,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         mark.push(m_s);
     }
     let n = cameras.len() as f64;
-    let (r, f, m) = (median(render), median(fuse), median(mark));
+    let (r, f, m) = (median(&mut render), median(&mut fuse), median(&mut mark));
     println!(
         "{} candidates, one thread, median of {reps} rounds: render {:.2} ms, fuse {:.2} ms, mark_within {:.2} ms per candidate; set-up {:.2} s in all",
         cameras.len(),

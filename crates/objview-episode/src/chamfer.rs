@@ -790,6 +790,30 @@ mod tests {
     }
 
     #[test]
+    fn mark_within_points_with_nan_or_infinite_coordinates_mark_nothing() {
+        // Targets in voxel 0 (where a NaN coordinate is keyed) and around it.
+        let h = 0.005;
+        let domain = Domain::covering(h, [-0.05; 3], [0.05; 3], 0.0);
+        let tp = vec![[0.001, 0.001, 0.001], [0.004, 0.002, 0.003], [-0.003, 0.0, 0.0]];
+        let t = Targets::new(domain, &tp, 0.1).unwrap();
+        let bad = [
+            [f64::NAN, 0.001, 0.001],
+            [0.001, f64::NAN, f64::NAN],
+            [f64::INFINITY, 0.0, 0.0],
+            [0.0, f64::NEG_INFINITY, 0.0],
+        ];
+        for tau in [0.002, 0.01, 0.03] {
+            let mut bits = vec![0u64; 1];
+            t.mark_within(&bad, tau, &mut bits);
+            assert_eq!(bits[0], 0, "tau {tau}");
+        }
+        // A finite point among them still marks what it reaches.
+        let mut bits = vec![0u64; 1];
+        t.mark_within(&[bad[0], [0.002, 0.002, 0.002]], 0.01, &mut bits);
+        assert_eq!(bits[0], 0b111);
+    }
+
+    #[test]
     fn mark_within_in_block_order_skips_the_sort_and_marks_the_same() {
         // A fused view's centroids (listed by block, as the oracle passes them: the no-sort
         // path) and the same points reversed (the sorting path) mark what brute force marks.
@@ -1025,9 +1049,13 @@ impl Targets {
         // relative, against errors of ~1e-13 of h in the keys and the squares), every target
         // of an occupied voxel is marked at once, with no distance test — the test would mark
         // it too. The walks below skip marked targets, so on a fused view's surface they test
-        // only the targets of empty voxels.
+        // only the targets of empty voxels. (A point with a NaN coordinate, keyed to voxel 0,
+        // is within τ of nothing and marks nothing here either.)
         if 3.0 * d.h * d.h * (1.0 + 1e-6) < t2 {
-            for &k in &keys {
+            for (&k, q) in keys.iter().zip(points) {
+                if !q.iter().all(|x| x.is_finite()) {
+                    continue;
+                }
                 let Some(b) = d.block_index(block_of(k)) else { continue };
                 let t = self.ix.table[b];
                 if t != NONE {

@@ -35,9 +35,9 @@
 
 use crate::fusion::FusedCloud;
 use crate::grid::{
-    block_of, cell_of_key, dist2, key_runs, keyed_points, local_index, lower_best_over, nearest_in,
-    nearest_in_block, runs_in_box, Aabb, BlockSearch, Bucketed, ChangedBlocks, Domain, Slab, SuperGrid,
-    BLOCK, BLOCK_CELLS, BLOCK_SHIFT, NONE,
+    block_of, cell_of_key, dist2, keyed_points, local_index, lower_best_over, nearest_in, nearest_in_block,
+    runs_in_box, Aabb, BlockSearch, Bucketed, ChangedBlocks, Domain, Slab, SuperGrid, BLOCK, BLOCK_CELLS,
+    BLOCK_SHIFT, NONE,
 };
 use rayon::prelude::*;
 
@@ -1031,12 +1031,11 @@ impl Targets {
         // exceeds τ².
         let m = tau * (1.0 + 1e-9) + 1e-12;
         let d = &self.ix.domain;
-        let b = 1i64 << BLOCK_SHIFT;
-        // The targets' voxels lie in `dlo..=dhi`. A point whose voxel lies more than r + 1
-        // voxels outside them along an axis is more than τ + h from every target and is left
-        // out.
-        let dlo: [i64; 3] = std::array::from_fn(|a| d.lo[a] as i64 * b);
-        let dhi: [i64; 3] = std::array::from_fn(|a| (d.lo[a] + d.dims[a]) as i64 * b - 1);
+        // The targets' voxels lie in `dlo..=dhi` (the domain's key box). A point whose voxel
+        // lies more than r + 1 voxels outside them along an axis is more than τ + h from every
+        // target and is left out.
+        let (dlo, dhi) = d.key_box();
+        let (dlo, dhi) = (dlo.map(i64::from), dhi.map(i64::from));
         let (kmin, kmax): ([i64; 3], [i64; 3]) =
             (std::array::from_fn(|a| dlo[a] - r - 1), std::array::from_fn(|a| dhi[a] + r + 1));
         let group_of = |k: [i64; 3]| k.map(|x| x >> MARK_GROUP_SHIFT);
@@ -1103,26 +1102,22 @@ impl Targets {
             // Groups numbered within the box of possible groups (lexicographic, z first, so that
             // points listed by block as `fusion::frame_centroids` lists them come in order),
             // visited once. Points already in that order need no sort.
-            Some(bound) => {
-                let number = |j: usize| {
-                    kept(j).map(|g| {
+            Some(_) => {
+                let mut numbered: Vec<(u64, u32)> = (0..points.len())
+                    .filter_map(|j| {
+                        let g = kept(j)?;
                         let rel: [u64; 3] = std::array::from_fn(|a| (g[a] - gmin[a]) as u64);
-                        (rel[2] * span[1] + rel[1]) * span[0] + rel[0]
+                        Some(((rel[2] * span[1] + rel[1]) * span[0] + rel[0], j as u32))
                     })
-                };
-                let numbered: Vec<(u64, u32)> =
-                    (0..points.len()).filter_map(|j| number(j).map(|g| (g, j as u32))).collect();
+                    .collect();
                 if numbered.is_sorted_by_key(|x| x.0) {
                     #[cfg(test)]
                     SORTED_WALKS.with(|c| c.set(c.get() + 1));
-                    for run in numbered.chunk_by(|x, y| x.0 == y.0) {
-                        visit(&mut run.iter().map(|x| x.1 as usize));
-                    }
                 } else {
-                    let grouped = key_runs(points.len(), bound, number);
-                    for &(_, a, b) in &grouped.runs {
-                        visit(&mut grouped.order[a..b].iter().map(|&j| j as usize));
-                    }
+                    numbered.sort_unstable();
+                }
+                for run in numbered.chunk_by(|x, y| x.0 == y.0) {
+                    visit(&mut run.iter().map(|x| x.1 as usize));
                 }
             }
             // Too many possible groups to number (only for a τ of millions of voxels): each

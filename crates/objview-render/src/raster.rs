@@ -41,7 +41,7 @@
 //! batches of 8 (AVX2: one 16-byte load per corner and a 4 × 4 transpose, then branch-free
 //! vectorized arithmetic: depth-range rejection, screen bounding box, edge and plane
 //! constants), then per surviving triangle its bounding box rows, 8 pixels at a time
-//! (coverage, inverse depth, z-test and masked stores, branch-free). Boxes at most 4 pixels
+//! (coverage, inverse depth, z-test and blended stores, branch-free). Boxes at most 4 pixels
 //! wide (nearly every triangle of a ~100k-triangle mesh at 512 × 512: boxes of 1–4 × 1–5
 //! pixels) take two rows of 4 pixels per vector instead, with the same per-pixel operations.
 //! Bounding boxes only limit which pixels are tested; they come from the f32 projected
@@ -53,7 +53,18 @@
 //! batches and per-triangle dispatch, 45 % pixel kernels, the rest vertex transform,
 //! grazing-triangle f64 path and final pass; ~10 % of the drawn triangles cover no pixel
 //! centre. Tried without gain: a 2 × 4 layout for boxes ≤ 2 pixels wide, straight-line code
-//! for boxes ≤ 4 rows, bit-set iteration over the drawn lanes, blended (unmasked) key stores.
+//! for boxes ≤ 4 rows, bit-set iteration over the drawn lanes.
+//!
+//! Stores: the kernels write keys and triangle ids back as whole vectors, the old values
+//! blended with the drawn lanes (`vpblendvb` + plain store), not with AVX2 masked stores
+//! (`vpmaskmovd`). Both leave the same bytes, but a masked store is slow on AMD Zen cores:
+//! on an AMD EPYC VM (2026-12-05, `objview bench render`, one thread, median per frame) the
+//! blended stores took the 9.5k / 98k / 996k-triangle `mug` from 1.60 / 3.40 / 17.9 ms to
+//! 0.77 / 2.08 / 13.7 ms; on Intel (Sapphire Rapids) an earlier try of them measured no gain
+//! and no loss. A whole-vector write also rewrites the lanes outside the box (their own old
+//! values, just read, so nothing changes; the buffers are padded by a vector and owned by one
+//! thread), and where two rows' windows overlap (images narrower than a vector, or the last
+//! row pair of a box being one row twice) the later row is written last or alone.
 
 use crate::{Camera, Frame, NO_HIT};
 use objview_geom::Mesh;
@@ -473,7 +484,8 @@ fn span_scalar(
 
 /// The rows of one triangle's box, LANES pixels at a time, branch-free: the same
 /// multiplications, additions and ordered comparisons per pixel as [`span_scalar`] (so the
-/// same result), an unsigned key comparison (sign-flip trick) and masked stores.
+/// same result), an unsigned key comparison (sign-flip trick) and blended whole-vector stores
+/// (see the module documentation: the same bytes as masked stores, faster on AMD).
 /// Caller guarantees: AVX2; x0 ≤ x1 < width, y0 ≤ y1 < height; z-buffers of at least (y1 + 1)·width + LANES entries and a px table padded by LANES.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
@@ -527,11 +539,17 @@ unsafe fn draw_rows_avx2(
             let old = _mm256_loadu2_m128i(kp.add(at2) as *const __m128i, kp.add(at) as *const __m128i);
             let nearer = _mm256_cmpgt_epi32(_mm256_xor_si256(old, sign), _mm256_xor_si256(key, sign));
             let m = _mm256_and_si256(_mm256_and_si256(cover, nearer), rows);
-            let (mlo, mhi) = (_mm256_castsi256_si128(m), _mm256_extracti128_si256::<1>(m));
-            _mm_maskstore_epi32(kp.add(at) as *mut i32, mlo, _mm256_castsi256_si128(key));
-            _mm_maskstore_epi32(kp.add(at2) as *mut i32, mhi, _mm256_extracti128_si256::<1>(key));
-            _mm_maskstore_epi32(ip.add(at) as *mut i32, mlo, _mm256_castsi256_si128(idv));
-            _mm_maskstore_epi32(ip.add(at2) as *mut i32, mhi, _mm256_castsi256_si128(idv));
+            let old_id = _mm256_loadu2_m128i(ip.add(at2) as *const __m128i, ip.add(at) as *const __m128i);
+            // Row v first, then row v2 (which wins where a narrow image makes their windows
+            // overlap); when v2 is v again its half is all old values and is not written.
+            let nk = _mm256_blendv_epi8(old, key, m);
+            let ni = _mm256_blendv_epi8(old_id, idv, m);
+            _mm_storeu_si128(kp.add(at) as *mut __m128i, _mm256_castsi256_si128(nk));
+            _mm_storeu_si128(ip.add(at) as *mut __m128i, _mm256_castsi256_si128(ni));
+            if v2 != v {
+                _mm_storeu_si128(kp.add(at2) as *mut __m128i, _mm256_extracti128_si256::<1>(nk));
+                _mm_storeu_si128(ip.add(at2) as *mut __m128i, _mm256_extracti128_si256::<1>(ni));
+            }
             v += 2;
         }
         return;
@@ -552,8 +570,9 @@ unsafe fn draw_rows_avx2(
             let nearer = _mm256_cmpgt_epi32(_mm256_xor_si256(old, sign), _mm256_xor_si256(key, sign));
             let in_span = _mm256_cmpgt_epi32(_mm256_set1_epi32((x1 + 1 - u) as i32), iota);
             let m = _mm256_and_si256(_mm256_and_si256(cover, nearer), in_span);
-            _mm256_maskstore_epi32(kp.add(at) as *mut i32, m, key);
-            _mm256_maskstore_epi32(ip.add(at) as *mut i32, m, idv);
+            let old_id = _mm256_loadu_si256(ip.add(at) as *const __m256i);
+            _mm256_storeu_si256(kp.add(at) as *mut __m256i, _mm256_blendv_epi8(old, key, m));
+            _mm256_storeu_si256(ip.add(at) as *mut __m256i, _mm256_blendv_epi8(old_id, idv, m));
             u += LANES;
         }
     }

@@ -60,8 +60,8 @@
 //! (`vpmaskmovd`). Both leave the same bytes, but a masked store is slow on AMD Zen cores:
 //! on an AMD EPYC VM (2026-12-05, `objview bench render`, one thread, median per frame) the
 //! blended stores took the 9.5k / 98k / 996k-triangle `mug` from 1.60 / 3.40 / 17.9 ms to
-//! 0.77 / 2.08 / 13.7 ms; on Intel (Sapphire Rapids) an earlier try of them measured no gain
-//! and no loss. A whole-vector write also rewrites the lanes outside the box (their own old
+//! 0.77 / 2.08 / 13.7 ms; on Intel (Sapphire Rapids) an earlier try of them was recorded as
+//! "without gain". A whole-vector write also rewrites the lanes outside the box (their own old
 //! values, just read, so nothing changes; the buffers are padded by a vector and owned by one
 //! thread), and where two rows' windows overlap (images narrower than a vector, or the last
 //! row pair of a box being one row twice) the later row is written last or alone.

@@ -6,8 +6,10 @@
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
+use objview_runs::bench::host::Host;
 use objview_runs::bench::render::{RenderBench, RenderBenchSettings};
-use std::path::PathBuf;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
 
 #[derive(Subcommand)]
 pub enum Command {
@@ -95,6 +97,23 @@ pub struct RenderArgs {
     pub json: Option<PathBuf>,
 }
 
+/// Prints the host line every timing benchmark starts with (CPU model, logical CPUs, SIMD
+/// features: figures only compare on the same kind of CPU) and returns the host for the
+/// `--json` figures.
+pub(crate) fn announce_host() -> Host {
+    let host = Host::detect();
+    println!("{}", host.line());
+    host
+}
+
+/// Writes a benchmark's `--json` figures with the host added under `"host"`.
+pub(crate) fn write_figures(path: &Path, mut figures: Value, host: &Host) -> Result<()> {
+    if let Value::Object(m) = &mut figures {
+        m.insert("host".into(), host.to_json());
+    }
+    crate::common::write_json(path, &figures)
+}
+
 pub fn run(cmd: Command) -> Result<()> {
     match cmd {
         Command::Render(a) => bench_render(a),
@@ -106,6 +125,7 @@ pub fn run(cmd: Command) -> Result<()> {
 }
 
 fn bench_render(a: RenderArgs) -> Result<()> {
+    let host = announce_host();
     let bench = RenderBench::new(RenderBenchSettings {
         object: a.object.clone(),
         sizes: a.sizes.clone(),
@@ -171,7 +191,7 @@ fn bench_render(a: RenderArgs) -> Result<()> {
         }
     }
     if let Some(p) = &a.json {
-        crate::common::write_json(p, &report.to_json())?;
+        write_figures(p, report.to_json(), &host)?;
     }
     Ok(())
 }

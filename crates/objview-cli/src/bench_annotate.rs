@@ -9,6 +9,7 @@ use objview_runs::bench::annotate::{
 use crate::bench::{AnnotateBenchArgs, StabilityArgs};
 
 pub fn bench_annotate(a: AnnotateBenchArgs) -> Result<()> {
+    let host = crate::bench::announce_host();
     let bench = AnnotateBench::new(AnnotateBenchSettings {
         objects: a.objects.clone(),
         sizes: a.sizes.clone(),
@@ -65,7 +66,7 @@ pub fn bench_annotate(a: AnnotateBenchArgs) -> Result<()> {
         bench.total_views()
     );
     if let Some(p) = &a.json {
-        crate::common::write_json(p, &report.to_json())?;
+        crate::bench::write_figures(p, report.to_json(), &host)?;
         println!("figures -> {}", p.display());
     }
     Ok(())

@@ -45,6 +45,7 @@ impl EpisodeBenchArgs {
 }
 
 pub fn bench_episode(a: EpisodeBenchArgs) -> Result<()> {
+    let host = crate::bench::announce_host();
     let r = measure(&a.settings(), crate::run::registry())?;
     println!(
         "{}: {} triangles, {} GT points; observable reference: {} points from {} views in {:.2} s ({:.1} ms/view)",
@@ -116,7 +117,7 @@ pub fn bench_episode(a: EpisodeBenchArgs) -> Result<()> {
         );
     }
     if let Some(path) = &a.json {
-        crate::common::write_json(path, &r.to_json())?;
+        crate::bench::write_figures(path, r.to_json(), &host)?;
     }
     Ok(())
 }

@@ -87,6 +87,7 @@ fn print(r: &LoadReport, what: &str) {
 }
 
 pub fn run(a: ServeBenchArgs) -> Result<()> {
+    let host = crate::bench::announce_host();
     let mut cfg = LoadConfig {
         url: String::new(),
         token: a.token.clone().or_else(|| std::env::var("OBJVIEW_TOKEN").ok()),
@@ -156,7 +157,8 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
     };
     print(&report, &what);
     if let Some(p) = &a.json {
-        crate::common::write_json(p, &json!({"what": what, "depth_fetched": !a.no_depth, "report": report}))?;
+        let figures = json!({"what": what, "depth_fetched": !a.no_depth, "report": report});
+        crate::bench::write_figures(p, figures, &host)?;
     }
     Ok(())
 }

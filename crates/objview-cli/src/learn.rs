@@ -673,6 +673,7 @@ fn ms(s: &objview_runs::bench::Spread) -> String {
 
 fn bench(a: BenchArgs) -> Result<()> {
     use objview_learn::bench::*;
+    crate::bench::announce_host();
     println!("learn bench: {} at ~{} triangles", a.object, a.triangles);
     let (nbv, scvp, completion) = match a.network.as_str() {
         "all" => (true, true, true),

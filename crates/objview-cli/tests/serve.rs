@@ -254,7 +254,18 @@ fn bench_serve_runs_concurrent_clients_against_an_in_process_server() {
         s(&json_out),
     ]);
     assert!(out.contains("moves/s") && out.contains("p99"), "{out}");
+    // The host the figures come from: first line of the output, and in the JSON.
+    assert!(
+        out.starts_with("host: ") && out.lines().next().unwrap().contains(" logical CPUs, features: "),
+        "{out}"
+    );
     let v: Value = serde_json::from_str(&std::fs::read_to_string(&json_out).unwrap()).unwrap();
+    assert!(
+        v["host"]["logical_cpus"].as_u64().unwrap() >= 1 && v["host"]["cpu"].is_string(),
+        "{}",
+        v["host"]
+    );
+    assert!(v["host"]["features"].is_array());
     let r = &v["report"];
     assert_eq!(r["episodes"], 6);
     assert_eq!(r["steps"], 12);

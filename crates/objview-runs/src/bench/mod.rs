@@ -8,12 +8,15 @@
 //!   sampling seed ([`annotate::StabilityBench`]).
 //! - [`render`]: depth rendering against an Open3D peer where one is installed, and O(v) per
 //!   view in both visibility modes ([`render::RenderBench`]).
+//! - [`host`]: the machine the figures come from (CPU model, logical CPUs, SIMD features),
+//!   which every benchmark prints and records.
 //!
 //! Benchmarks are procedures run on demand, never timed unit tests: the tests here only check
 //! the shape of the figures. Medians and percentiles are [`objview_geom::stats`]'s.
 
 pub mod annotate;
 pub mod episode;
+pub mod host;
 pub mod render;
 
 use objview_geom::stats::{median, percentile};

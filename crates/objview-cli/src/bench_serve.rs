@@ -87,7 +87,11 @@ fn print(r: &LoadReport, what: &str) {
 }
 
 pub fn run(a: ServeBenchArgs) -> Result<()> {
+    // Against `--url` this is the clients' machine; the server's may be another.
     let host = crate::bench::announce_host();
+    if a.url.is_some() {
+        println!("(the clients' host: the server at --url may run on another machine)");
+    }
     let mut cfg = LoadConfig {
         url: String::new(),
         token: a.token.clone().or_else(|| std::env::var("OBJVIEW_TOKEN").ok()),

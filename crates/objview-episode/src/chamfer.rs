@@ -633,8 +633,6 @@ mod tests {
             .collect()
     }
 
-    /// Random "views": patches of a sphere of radius 0.5 sampled densely, with jitter, so
-    /// voxels are revisited and centroids move.
     /// A sphere patch of `n` targets (seeded) in a domain over [−0.6, 0.6]³ at h = 0.005, with
     /// its index (cap 0.01), and the generator to draw more from.
     fn patch_targets(seed: u64, n: usize) -> (rand_chacha::ChaCha8Rng, Domain, Vec<[f64; 3]>, Targets) {
@@ -645,6 +643,8 @@ mod tests {
         (rng, domain, tp, t)
     }
 
+    /// Random "views": patches of a sphere of radius 0.5 sampled densely, with jitter, so
+    /// voxels are revisited and centroids move.
     fn patch(rng: &mut rand_chacha::ChaCha8Rng, n: usize) -> Vec<[f64; 3]> {
         let c: [f64; 3] = [rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)];
         let cn = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();

@@ -90,6 +90,9 @@ fn main() {
             std::process::exit(2);
         }
     };
+    if ends_quietly_on_closed_pipe(&cli.command) {
+        restore_default_sigpipe();
+    }
     let result = match cli.command {
         Command::Render(a) => render::run(a),
         Command::Viewset(c) => viewset::run(c),
@@ -112,6 +115,31 @@ fn main() {
     }
 }
 
+/// Whether `command` gets the default action of SIGPIPE: end at once, quietly, when the reader
+/// of its output goes away (`objview report … | head`), as Unix tools do. Rust's runtime
+/// ignores SIGPIPE, so a write to a closed pipe fails with EPIPE and `println!` panics with a
+/// backtrace. Commands that hold network connections keep ignoring it: the server, a run
+/// against a server and the server benchmark, where a peer that closes its socket must be an
+/// error on that connection, never the end of the process.
+fn ends_quietly_on_closed_pipe(command: &Command) -> bool {
+    match command {
+        Command::Serve(_) => false,
+        Command::Run(a) => a.server.is_none(),
+        Command::Bench(bench::Command::Serve(_)) => false,
+        _ => true,
+    }
+}
+
+/// Sets SIGPIPE's action back to the default (terminate the process).
+fn restore_default_sigpipe() {
+    #[cfg(unix)]
+    // SAFETY: called on the main thread before any other thread exists; `signal` with
+    // SIG_DFL installs no handler.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 /// The chain of causes joined by ": " on one line, innermost last; a cause whose text the
 /// message so far already ends with (errors that print their source) is not repeated.
 pub(crate) fn one_line(e: &anyhow::Error) -> String {
@@ -131,6 +159,42 @@ pub(crate) fn one_line(e: &anyhow::Error) -> String {
 
 #[cfg(test)]
 mod tests {
+    use super::{ends_quietly_on_closed_pipe, Cli, Command};
+    use clap::Parser;
+
+    fn command(args: &[&str]) -> Command {
+        Cli::try_parse_from(std::iter::once("objview").chain(args.iter().copied())).unwrap().command
+    }
+
+    #[test]
+    fn only_commands_without_network_connections_end_on_a_closed_pipe() {
+        assert!(ends_quietly_on_closed_pipe(&command(&["objects", "list"])));
+        assert!(ends_quietly_on_closed_pipe(&command(&["report", "r.jsonl"])));
+        assert!(ends_quietly_on_closed_pipe(&command(&["bench", "render"])));
+        assert!(ends_quietly_on_closed_pipe(&command(&[
+            "run",
+            "--objects",
+            "o",
+            "--planner",
+            "random",
+            "--out",
+            "x"
+        ])));
+        assert!(!ends_quietly_on_closed_pipe(&command(&["serve", "--pool", "p"])));
+        assert!(!ends_quietly_on_closed_pipe(&command(&["bench", "serve"])));
+        assert!(!ends_quietly_on_closed_pipe(&command(&[
+            "run",
+            "--server",
+            "http://127.0.0.1:1",
+            "--objects",
+            "o",
+            "--planner",
+            "random",
+            "--out",
+            "x"
+        ])));
+    }
+
     #[test]
     fn one_line_drops_repeated_causes() {
         let io = std::io::Error::new(std::io::ErrorKind::NotFound, "gone");

@@ -76,3 +76,28 @@ fn annotate_takes_a_random_pool_folder() {
     assert!(lines[0]["uid"].as_str().unwrap().starts_with("p4-00000-"), "{text}");
     assert!(lines[0].get("error").is_none(), "{text}");
 }
+
+/// A reader that goes away (`objview objects list | head -1`) ends the command quietly by
+/// SIGPIPE, as Unix tools do, instead of a panic with a backtrace ("failed printing to stdout:
+/// Broken pipe"). The pipe's read end is closed before the command starts, so its first write
+/// meets the closed pipe whatever the timing.
+#[cfg(unix)]
+#[test]
+fn a_closed_output_pipe_ends_the_command_quietly() {
+    use std::os::fd::{FromRawFd, OwnedFd};
+    use std::os::unix::process::ExitStatusExt;
+    let mut fds = [0 as libc::c_int; 2];
+    // SAFETY: `pipe` fills two new descriptors, each then owned by exactly one OwnedFd.
+    assert_eq!(unsafe { libc::pipe(fds.as_mut_ptr()) }, 0, "pipe");
+    let (read_end, write_end) = unsafe { (OwnedFd::from_raw_fd(fds[0]), OwnedFd::from_raw_fd(fds[1])) };
+    drop(read_end);
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_objview"))
+        .args(["objects", "list"])
+        .stdout(std::process::Stdio::from(write_end))
+        .stderr(std::process::Stdio::piped())
+        .output()
+        .expect("running objview");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.is_empty(), "stderr: {stderr}");
+    assert_eq!(out.status.signal(), Some(libc::SIGPIPE), "{}", out.status);
+}

@@ -105,6 +105,8 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
         fetch_depth: !a.no_depth,
         candidate_set: "tammes-360".into(),
     };
+    // In-process: the peak resident memory after the warm-up episode and after the run.
+    let mut memory: Option<(u64, u64)> = None;
     let (report, what, _server, _dir) = if let Some(url) = &a.url {
         cfg.url = url.clone();
         cfg.split = a.split.clone().context("--url needs --split")?;
@@ -147,7 +149,9 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
         // One warm-up episode builds (or loads) the scene and its observable reference.
         let warm = LoadConfig { clients: 1, episodes_per_client: 1, ..cfg.clone() };
         run_load(&warm)?;
+        let warm_peak = objview_runs::bench::peak_rss();
         let r = run_load(&cfg)?;
+        memory = warm_peak.zip(objview_runs::bench::peak_rss());
         let sc = server.state.scenes.stats();
         eprintln!("bench serve: scene cache: {} build(s), {} reuse(s), {} held", sc.builds, sc.hits, sc.held);
         let what = format!(
@@ -160,8 +164,25 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
         (r, what, Some(server), Some(dir))
     };
     print(&report, &what);
+    let concurrent = a.clients.min(report.episodes);
+    let memory_json = memory.map(|(warm, peak)| {
+        let per = objview_runs::bench::memory_per_episode(warm, peak, concurrent);
+        let mb = |b: f64| b / (1024.0 * 1024.0);
+        println!(
+            "  memory (server and clients, one process): peak RSS {:.0} MB; {:.0} MB after the warm-up episode (scene built){}",
+            mb(peak as f64),
+            mb(warm as f64),
+            per.map_or(String::new(), |p| format!(
+                ", so ≈ {:.1} MB per further concurrent episode ({concurrent} at once)",
+                mb(p)
+            ))
+        );
+        json!({"peak_rss_bytes": peak, "warm_peak_rss_bytes": warm, "concurrent_episodes": concurrent,
+               "bytes_per_further_episode": per})
+    });
     if let Some(p) = &a.json {
-        let figures = json!({"what": what, "depth_fetched": !a.no_depth, "report": report});
+        let figures =
+            json!({"what": what, "depth_fetched": !a.no_depth, "report": report, "memory": memory_json});
         crate::bench::write_figures(p, figures, &host)?;
     }
     Ok(())

@@ -272,6 +272,17 @@ fn bench_serve_runs_concurrent_clients_against_an_in_process_server() {
     assert_eq!(r["client"]["samples"], 12);
     assert_eq!(r["server"]["samples"], 12, "every action answer carries Server-Timing");
     assert!(r["steps_per_second"].as_f64().unwrap() > 0.0);
+    // Memory: the process's peak after the warm-up episode and after the run (Linux).
+    if std::path::Path::new("/proc/self/status").exists() {
+        assert!(out.contains("memory (server and clients, one process): peak RSS "), "{out}");
+        assert!(out.contains("per further concurrent episode (3 at once)"), "{out}");
+        let m = &v["memory"];
+        let (warm, peak) =
+            (m["warm_peak_rss_bytes"].as_u64().unwrap(), m["peak_rss_bytes"].as_u64().unwrap());
+        assert!(warm > 0 && peak >= warm, "{m}");
+        assert_eq!(m["concurrent_episodes"], 3);
+        assert_eq!(m["bytes_per_further_episode"].as_f64().unwrap(), (peak - warm) as f64 / 2.0, "{m}");
+    }
 }
 
 /// `GET /v1/health` on a fresh connection: whether a 200 came, and how long it took.

@@ -25,6 +25,7 @@ use crate::metrics;
 use crate::planner::{Action, Environment, EpisodeContext, Observation, OracleAccess, Planner};
 use crate::reference::Reference;
 use crate::result::{Checkpoint, EpisodeResult, Step, StepMetrics};
+use crate::scratch::Pool;
 use crate::settings::EpisodeSettings;
 use crate::stabilization::Stabilization;
 use crate::validate::{check_pose, check_view_pose};
@@ -174,13 +175,23 @@ pub struct Episode {
     runtime: f64,
     path_cost: f64,
     terminal: Option<Terminal>,
-    renderer: Renderer,
+    /// The latest view (its depth is the observation; RGB is rendered from its triangle ids).
     frame: Frame,
-    /// Buffers reused by every step: the observed points and the changed slots' groups.
-    points: Vec<[f64; 3]>,
-    groups: ChangedBlocks,
     started: Instant,
 }
+
+/// The buffers of one engine step, shared by every episode of the process through
+/// [`STEP_SCRATCH`] (see [`crate::scratch`]): the renderer's, the observed points and the
+/// changed slots' groups.
+#[derive(Default)]
+struct StepScratch {
+    renderer: Renderer,
+    points: Vec<[f64; 3]>,
+    groups: ChangedBlocks,
+}
+
+/// The step buffers of every episode of the process.
+static STEP_SCRATCH: Pool<StepScratch> = Pool::new();
 
 impl Episode {
     /// Starts an episode: takes the start view at `start_pose` and scores it. Errors: bad
@@ -232,10 +243,7 @@ impl Episode {
             runtime: 0.0,
             path_cost: 0.0,
             terminal: None,
-            renderer: Renderer::new(),
             frame: Frame::empty(cam),
-            points: Vec::new(),
-            groups: ChangedBlocks::default(),
             started,
             scene,
             settings,
@@ -438,14 +446,16 @@ impl Episode {
     fn observe(&mut self, pose: Pose, planner_seconds: f64) {
         let t0 = Instant::now();
         let cam = Camera::new(pose, self.scene.intrinsics);
-        self.renderer.render_into(&self.scene.mesh, &cam, &mut self.frame);
-        let t_render = t0.elapsed().as_secs_f64();
-        self.frame.observed_points_into(&mut self.points);
-        let delta = self.fused.insert(&self.points);
-        let t_fuse = t0.elapsed().as_secs_f64();
-        self.groups.rebuild_latest(&self.fused);
-        metrics::update_coverage(&mut self.gt, &mut self.reference, &self.fused, &self.groups);
-        let t_cov = t0.elapsed().as_secs_f64();
+        let (delta, t_render, t_fuse, t_cov) = STEP_SCRATCH.with(|s| {
+            s.renderer.render_into(&self.scene.mesh, &cam, &mut self.frame);
+            let t_render = t0.elapsed().as_secs_f64();
+            self.frame.observed_points_into(&mut s.points);
+            let delta = self.fused.insert(&s.points);
+            let t_fuse = t0.elapsed().as_secs_f64();
+            s.groups.rebuild_latest(&self.fused);
+            metrics::update_coverage(&mut self.gt, &mut self.reference, &self.fused, &s.groups);
+            (delta, t_render, t_fuse, t0.elapsed().as_secs_f64())
+        });
         metrics::add_new_voxels(&mut self.ms, &self.fused, delta.new_slots);
         self.path_cost = metrics::path_cost(self.path_cost, self.history.last(), &pose);
         self.history.push(pose);

@@ -10,6 +10,8 @@
 
 use std::sync::OnceLock;
 
+use crate::scratch::Pool;
+
 use crate::grid::{
     block_of, local_index, lower_best_over, nearest_in, runs_in_box, Aabb, Bucketed, Domain, Slab, SuperGrid,
     SuperHandle, BLOCK_CELLS, NONE,
@@ -180,23 +182,44 @@ pub struct FusedCloud {
     /// The occupied blocks by superblock (far nearest searches).
     pub supergrid: SuperGrid,
     epoch: u32,
-    /// Scratch of [`FusedCloud::insert`]: one block's sums by fine voxel (stays in cache).
-    scratch: Box<[Accum; BLOCK_CELLS]>,
     /// The blocks the latest insertion changed, as (domain index, allocation index), by domain
     /// index: [`FusedCloud::latest_changes`].
     latest: Vec<(u32, u32)>,
-    /// Buffers of [`FusedCloud::insert`] kept between insertions (each ~80k entries per view):
-    /// every point's (block, voxel), and the points by block.
+}
+
+/// The buffers of [`FusedCloud::insert`] (each ~80k entries per view, ~13 MB in all on a
+/// 100k-triangle object), shared by every cloud of the process through [`INSERT_SCRATCH`]:
+/// nothing in them outlives an insertion.
+struct InsertScratch {
+    /// One block's sums by fine voxel (stays in cache).
+    accum: Box<[Accum; BLOCK_CELLS]>,
+    /// Every point's (block, voxel), and the points by block.
     at: Vec<(u32, u16)>,
     order: Vec<Sorted>,
-    /// Scratch of [`FusedCloud::insert`]: every point's fine key.
+    /// Every point's fine key.
     keys: Vec<[i32; 3]>,
-    /// Scratch of [`FusedCloud::insert`]: the voxels seen for the first time, as (first point,
-    /// block, local index, centroid), and their indices in `fresh` in the order of their first
-    /// point (the slot order; built through a per-point table when there are many).
+    /// The voxels seen for the first time, as (first point, block, local index, centroid), and
+    /// their indices in `fresh` in the order of their first point (the slot order; built
+    /// through a per-point table when there are many).
     fresh: Vec<(u32, u32, u16, [f64; 3])>,
     by_first: Vec<u32>,
 }
+
+impl Default for InsertScratch {
+    fn default() -> Self {
+        InsertScratch {
+            accum: Box::new([Accum::default(); BLOCK_CELLS]),
+            at: Vec::new(),
+            order: Vec::new(),
+            keys: Vec::new(),
+            fresh: Vec::new(),
+            by_first: Vec::new(),
+        }
+    }
+}
+
+/// The insertion buffers of every fused cloud of the process (see [`crate::scratch`]).
+static INSERT_SCRATCH: Pool<InsertScratch> = Pool::new();
 
 /// A point of the current insertion in its block's bucket: its coordinates, input index and
 /// local voxel index (one 32-byte entry, so a block's points are read in one sequential run).
@@ -240,13 +263,7 @@ impl FusedCloud {
             block: Vec::new(),
             stamp: Vec::new(),
             epoch: 0,
-            scratch: Box::new([Accum::default(); BLOCK_CELLS]),
             latest: Vec::new(),
-            at: Vec::new(),
-            order: Vec::new(),
-            keys: Vec::new(),
-            fresh: Vec::new(),
-            by_first: Vec::new(),
         }
     }
 
@@ -302,15 +319,20 @@ impl FusedCloud {
     /// points are accumulated with that block's voxel table and sums in cache: in pixel order
     /// they would visit the blocks of a whole scanline again and again.
     pub fn insert(&mut self, points: &[[f64; 3]]) -> FusionDelta {
+        INSERT_SCRATCH.with(|scratch| self.insert_with(points, scratch))
+    }
+
+    /// [`FusedCloud::insert`] with the buffers `s` (whatever they hold is overwritten).
+    fn insert_with(&mut self, points: &[[f64; 3]], s: &mut InsertScratch) -> FusionDelta {
         self.epoch += 1;
         let epoch = self.epoch;
         let mut delta = FusionDelta::default();
         // Pass 1: each point's block (allocated on first use) and voxel; per-block counts.
-        let mut at = std::mem::take(&mut self.at);
+        let mut at = std::mem::take(&mut s.at);
         at.clear();
         let mut touched: Vec<u32> = Vec::new();
         let mut last: (usize, u32) = (usize::MAX, NONE);
-        let mut keys = std::mem::take(&mut self.keys);
+        let mut keys = std::mem::take(&mut s.keys);
         self.domain.keys_into(points, &mut keys);
         for &k in &keys {
             let Some(b) = self.domain.block_index(block_of(k)) else {
@@ -346,7 +368,7 @@ impl FusedCloud {
             blk.bucket = offset;
             offset += n;
         }
-        let mut order = std::mem::take(&mut self.order);
+        let mut order = std::mem::take(&mut s.order);
         order.clear();
         order.resize(offset as usize, Sorted::default());
         for (i, (&(t, li), &p)) in at.iter().zip(points).enumerate() {
@@ -359,7 +381,7 @@ impl FusedCloud {
         // Pass 2: block by block, sums per voxel (in the scratch), then the new centroids of
         // the block's voxels seen before; voxels seen for the first time are kept aside with
         // their first point and centroid.
-        let mut fresh = std::mem::take(&mut self.fresh);
+        let mut fresh = std::mem::take(&mut s.fresh);
         fresh.clear();
         let mut start = 0usize;
         for &t in &touched {
@@ -368,7 +390,7 @@ impl FusedCloud {
             blk.bucket = 0;
             blk.changed_bits = [0; BLOCK_CELLS / 64];
             blk.slab = OnceLock::new();
-            let scratch = &mut self.scratch;
+            let scratch = &mut s.accum;
             for &Sorted { p, i, li } in &order[start..end] {
                 let li = li as usize;
                 let (w, bit) = (li >> 6, 1u64 << (li & 63));
@@ -419,7 +441,7 @@ impl FusedCloud {
         // point is the first of at most one voxel: many fresh voxels (a first view) are placed
         // by their first point's index and read back in input order; a few (later views, where
         // that pass would clear and scan an entry per point) are sorted by it.
-        let mut by_first = std::mem::take(&mut self.by_first);
+        let mut by_first = std::mem::take(&mut s.by_first);
         by_first.clear();
         if fresh.len() * FRESH_SORT_SHARE < points.len() {
             by_first.extend(0..fresh.len() as u32);
@@ -445,10 +467,10 @@ impl FusedCloud {
             self.block.push(self.domain.block_index(blk.key).expect("an allocated block") as u32);
             self.stamp.push(epoch);
         }
-        self.by_first = by_first;
-        self.keys = keys;
+        s.by_first = by_first;
+        s.keys = keys;
         delta.new_slots = fresh.len();
-        self.fresh = fresh;
+        s.fresh = fresh;
         // Spatial order (block, then voxel) for cache-friendly metric updates: the touched
         // blocks by domain index, and each one's changed voxels by local index.
         let mut by_domain = std::mem::take(&mut self.latest);
@@ -460,8 +482,8 @@ impl FusedCloud {
             delta.changed.extend(blk.changed_places().map(|j| blk.slots[j]));
         }
         self.latest = by_domain;
-        self.at = at;
-        self.order = order;
+        s.at = at;
+        s.order = order;
         delta
     }
 
@@ -912,6 +934,39 @@ mod tests {
                 assert!(own.iter().all(|&s| f.pos[s as usize][0].to_bits()
                     == latest.xyz[0][latest.slots.iter().position(|&q| q == s).unwrap()].to_bits()));
             }
+        }
+    }
+
+    #[test]
+    fn groups_reused_for_another_domain_equal_fresh_ones() {
+        // The engine's step buffers go from episode to episode, across objects: a value of
+        // ChangedBlocks last used on one domain must group another domain's changes exactly as
+        // a fresh one does — including its lookup table, which has the same size for two
+        // domains of equal dimensions (here shifted by three blocks along x).
+        use crate::grid::ChangedBlocks;
+        let a = domain();
+        let b = Domain { lo: [a.lo[0] + 3, a.lo[1], a.lo[2]], ..a };
+        assert_eq!(a.num_blocks(), b.num_blocks());
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
+        let mut patch = |n: usize| -> Vec<[f64; 3]> {
+            (0..n)
+                .map(|_| [rng.gen_range(-0.2..0.2), rng.gen_range(-0.2..0.2), rng.gen_range(-0.05..0.05)])
+                .collect()
+        };
+        let mut reused = ChangedBlocks::default();
+        let mut fa = FusedCloud::new(a);
+        fa.insert(&patch(4000));
+        reused.rebuild_latest(&fa);
+        let mut fb = FusedCloud::new(b);
+        for _ in 0..2 {
+            fb.insert(&patch(3000));
+            reused.rebuild_latest(&fb);
+            let mut fresh = ChangedBlocks::default();
+            fresh.rebuild_latest(&fb);
+            assert!(reused.lookup == fresh.lookup, "lookup tables differ");
+            assert_eq!(reused.slots, fresh.slots);
+            let keys = |g: &ChangedBlocks| g.blocks.iter().map(|x| (x.key, x.range)).collect::<Vec<_>>();
+            assert_eq!(keys(&reused), keys(&fresh));
         }
     }
 

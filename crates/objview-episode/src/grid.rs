@@ -951,6 +951,10 @@ pub struct ChangedBlocks {
     pub(crate) xyz: [Vec<f64>; 3],
     /// Domain block index → index into `blocks`, or NONE.
     pub(crate) lookup: Vec<u32>,
+    /// The entries of `lookup` that are set, so that a reset clears exactly those, whichever
+    /// domain (object) the value served last (the engine's step buffers are shared by every
+    /// episode of the process).
+    indexed: Vec<u32>,
 }
 
 pub(crate) struct ChangedBlock {
@@ -1007,12 +1011,11 @@ impl ChangedBlocks {
         if self.lookup.len() != n {
             self.lookup = vec![NONE; n];
         } else {
-            for g in &self.blocks {
-                if let Some(b) = fused.domain.block_index(g.key) {
-                    self.lookup[b] = NONE;
-                }
+            for &b in &self.indexed {
+                self.lookup[b as usize] = NONE;
             }
         }
+        self.indexed.clear();
         self.blocks.clear();
         self.slots.clear();
         self.xyz.iter_mut().for_each(Vec::clear);
@@ -1044,6 +1047,7 @@ impl ChangedBlocks {
         for (gi, g) in self.blocks.iter().enumerate() {
             if let Some(b) = fused.domain.block_index(g.key) {
                 self.lookup[b] = gi as u32;
+                self.indexed.push(b as u32);
             }
         }
     }

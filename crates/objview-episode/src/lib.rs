@@ -11,6 +11,7 @@
 //! - [`reference`](mod@reference) — the observable reference (NSC's denominator), cached on disk.
 //! - [`stabilization`] — MS@δ.
 //! - [`scene`] — loading the hidden object (mesh, ground truth, reference).
+//! - `scratch` — the step buffers shared by every episode of the process.
 //! - [`scripted`] — a planner that plays a fixed action list (replays, tests, benchmarks).
 //! - [`engine`] — the environment, checkpoints, budgets and terminal reasons.
 //! - [`result`] — the JSON Lines result format; [`settings`] — every SPEC §5 constant.
@@ -34,6 +35,7 @@ pub mod metrics;
 pub mod reference;
 pub mod result;
 pub mod scene;
+mod scratch;
 pub mod scripted;
 pub mod settings;
 pub mod stabilization;

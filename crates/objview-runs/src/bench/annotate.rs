@@ -15,22 +15,8 @@ use objview_geom::synth;
 use rayon::prelude::*;
 use serde_json::{json, Value};
 
-use super::thread_pool;
+use super::{peak_rss, reset_peak_rss, thread_pool};
 use crate::RunError;
-
-/// Peak resident memory of this process (Linux `VmHWM`, bytes), if the OS reports it.
-pub fn peak_rss() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
-}
-
-/// Resets the peak of [`peak_rss`] (Linux `clear_refs` 5); false where unsupported (the peak
-/// then covers the whole process so far).
-pub fn reset_peak_rss() -> bool {
-    std::fs::write("/proc/self/clear_refs", "5").is_ok()
-}
 
 /// Writes built-in object `name` with about `triangles` triangles (0: its default detail) as
 /// `<dir>/<name>.obj`; its object reference (uid `name`).

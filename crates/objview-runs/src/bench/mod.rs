@@ -21,6 +21,27 @@ pub mod render;
 
 use objview_geom::stats::{median, percentile};
 
+/// Peak resident memory of this process (Linux `VmHWM`, bytes), if the OS reports it.
+pub fn peak_rss() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// Resets the peak of [`peak_rss`] (Linux `clear_refs` 5); false where unsupported (the peak
+/// then covers the whole process so far).
+pub fn reset_peak_rss() -> bool {
+    std::fs::write("/proc/self/clear_refs", "5").is_ok()
+}
+
+/// Memory per concurrent episode of a load run: the growth of the peak resident memory from
+/// a warm-up with one episode (`warm`, bytes) to the run with `concurrent` episodes at once
+/// (`peak`), per episode beyond the first; `None` with fewer than two episodes.
+pub fn memory_per_episode(warm: u64, peak: u64, concurrent: usize) -> Option<f64> {
+    (concurrent >= 2).then(|| peak.saturating_sub(warm) as f64 / (concurrent - 1) as f64)
+}
+
 /// Median, nearest-rank 90th percentile and maximum of a set of timings (seconds); NaN for
 /// each when there are none.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -51,7 +72,17 @@ fn thread_pool(threads: usize) -> Result<rayon::ThreadPool, crate::RunError> {
 
 #[cfg(test)]
 mod tests {
-    use super::Spread;
+    use super::{memory_per_episode, Spread};
+
+    #[test]
+    fn memory_per_episode_is_the_peak_growth_per_further_episode() {
+        assert_eq!(memory_per_episode(100, 400, 4), Some(100.0));
+        assert_eq!(memory_per_episode(100, 100, 32), Some(0.0));
+        // A peak below the warm-up's (a reset peak) counts as no growth.
+        assert_eq!(memory_per_episode(300, 200, 2), Some(0.0));
+        assert_eq!(memory_per_episode(100, 400, 1), None);
+        assert_eq!(memory_per_episode(100, 400, 0), None);
+    }
 
     #[test]
     fn a_spread_is_median_p90_and_max_of_unsorted_samples() {

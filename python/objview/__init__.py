@@ -35,9 +35,12 @@ from .errors import (
     MethodNotAllowed,
     NotFound,
     ObjViewError,
+    Overloaded,
     PayloadTooLarge,
+    RequestTimeout,
     ServerError,
     StaleStep,
+    TooManyEpisodes,
     TransportError,
     Unauthorized,
 )
@@ -87,5 +90,8 @@ __all__ = [
     "EpisodeRunning",
     "PayloadTooLarge",
     "InvalidRequest",
+    "RequestTimeout",
+    "TooManyEpisodes",
+    "Overloaded",
     "learn",
 ]

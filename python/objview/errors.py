@@ -95,6 +95,25 @@ class InvalidRequest(ServerError):
     CODE, STATUS = "invalid_request", 422
 
 
+class RequestTimeout(ServerError):
+    """408 ``request_timeout``: the request body did not arrive within the server's limit."""
+
+    CODE, STATUS = "request_timeout", 408
+
+
+class TooManyEpisodes(ServerError):
+    """429 ``too_many_episodes``: the server's cap on running episodes (in all, or of this
+    token) is reached; finish or abort an episode, or wait for idle ones to time out."""
+
+    CODE, STATUS = "too_many_episodes", 429
+
+
+class Overloaded(ServerError):
+    """503 ``overloaded``: every connection the server keeps open is busy; retry later."""
+
+    CODE, STATUS = "overloaded", 503
+
+
 _BY_CODE: Dict[str, Type[ServerError]] = {}
 _BY_STATUS: Dict[int, Type[ServerError]] = {}
 for _cls in (
@@ -107,6 +126,9 @@ for _cls in (
     EpisodeRunning,
     PayloadTooLarge,
     InvalidRequest,
+    RequestTimeout,
+    TooManyEpisodes,
+    Overloaded,
 ):
     _BY_CODE[str(_cls.CODE)] = _cls
     if _cls.STATUS is not None:

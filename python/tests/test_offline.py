@@ -27,6 +27,9 @@ from objview.planner import action_to_json
         (409, "episode_running", objview.EpisodeRunning),
         (413, "payload_too_large", objview.PayloadTooLarge),
         (422, "invalid_request", objview.InvalidRequest),
+        (408, "request_timeout", objview.RequestTimeout),
+        (429, "too_many_episodes", objview.TooManyEpisodes),
+        (503, "overloaded", objview.Overloaded),
     ],
 )
 def test_error_codes_map_to_classes(status, code, cls):

@@ -134,6 +134,8 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
             pool: vec![split],
             db: dir.path().join("bench.sqlite"),
             cache_dir: Some(a.cache_dir.clone().unwrap_or_else(objview_runs::cache::default_reference_cache)),
+            // Room for every client's episode, whatever --clients.
+            max_running: a.clients.max(objview_server::DEFAULT_MAX_RUNNING),
             ..Default::default()
         };
         let server = objview_server::spawn(&server_cfg, "127.0.0.1:0")?;

@@ -60,6 +60,15 @@ pub struct Args {
     /// Seconds a connection with no request in progress stays open after its last activity.
     #[arg(long, default_value_t = objview_server::conn::DEFAULT_IDLE_TIMEOUT_S)]
     pub idle_timeout: f64,
+    /// Running episodes at most, in all: each holds its engine state in memory (~62 MB on a
+    /// 100k-triangle object with a 300k-point ground truth; `objview bench serve` prints it).
+    /// A create beyond it gets 429 `too_many_episodes`.
+    #[arg(long, default_value_t = objview_server::DEFAULT_MAX_RUNNING)]
+    pub max_running: usize,
+    /// Running episodes at most per token (with --tokens), so that one client cannot take every
+    /// place; beyond it, 429 `too_many_episodes`.
+    #[arg(long, default_value_t = objview_server::DEFAULT_MAX_RUNNING_PER_TOKEN)]
+    pub max_running_per_token: usize,
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -81,6 +90,8 @@ pub fn run(a: Args) -> Result<()> {
         header_timeout_s: a.header_timeout,
         body_timeout_s: a.body_timeout,
         idle_timeout_s: a.idle_timeout,
+        max_running: a.max_running,
+        max_running_per_token: a.max_running_per_token,
     };
     objview_server::run(&cfg, &a.addr, |addr, state| {
         let splits: Vec<String> = state
@@ -94,13 +105,15 @@ pub fn run(a: Args) -> Result<()> {
         let l = &state.limits;
         println!(
             "objview serve: listening on http://{addr} | splits: {} | db {} | connections <= {} \
-             (header {} s, body {} s, idle {} s)",
+             (header {} s, body {} s, idle {} s) | running episodes <= {} ({} per token)",
             splits.join(", "),
             a.db.display(),
             l.conn.max_connections,
             l.conn.header_timeout.as_secs_f64(),
             l.body_timeout.as_secs_f64(),
-            l.conn.idle_timeout.as_secs_f64()
+            l.conn.idle_timeout.as_secs_f64(),
+            l.max_running,
+            l.max_running_per_token
         );
         let _ = std::io::stdout().flush();
     })?;

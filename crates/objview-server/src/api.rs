@@ -308,6 +308,9 @@ async fn candidate_set(
 
 async fn create(State(st): State<Arc<AppState>>, c: Caller, Body(body): Body) -> Result<Response, ApiError> {
     let spec = CreateSpec::parse(&body, &st.pool)?;
+    // A full server answers at once, before any scene or engine work (the place itself is
+    // taken inside `create`, under the same check).
+    st.check_running(&c.owner, false)?;
     // The prepared scene first, outside the engine gate: a scene being built (seconds, once per
     // object) keeps no core's permit from the steps of running episodes, and concurrent creates
     // of one object wait for that one build on the blocking pool, not in the gate's queue.

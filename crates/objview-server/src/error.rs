@@ -41,6 +41,10 @@ pub enum ApiError {
     /// connection is closed after the answer).
     #[error("{0}")]
     RequestTimeout(String),
+    /// 429 `too_many_episodes`: the server's cap on running episodes, in all or per token, is
+    /// reached (each running episode holds its engine state in memory).
+    #[error("{0}")]
+    TooManyEpisodes(String),
     /// 503 `overloaded`: every connection the server keeps open is busy with a request (the
     /// connection is closed after the answer).
     #[error("{0}")]
@@ -65,6 +69,7 @@ impl ApiError {
             }
             ApiError::PayloadTooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,
             ApiError::RequestTimeout(_) => StatusCode::REQUEST_TIMEOUT,
+            ApiError::TooManyEpisodes(_) => StatusCode::TOO_MANY_REQUESTS,
             ApiError::Overloaded(_) => StatusCode::SERVICE_UNAVAILABLE,
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
@@ -83,6 +88,7 @@ impl ApiError {
             ApiError::EpisodeRunning(_) => "episode_running",
             ApiError::PayloadTooLarge(_) => "payload_too_large",
             ApiError::RequestTimeout(_) => "request_timeout",
+            ApiError::TooManyEpisodes(_) => "too_many_episodes",
             ApiError::Overloaded(_) => "overloaded",
             ApiError::Internal(_) => "internal",
         }

@@ -75,7 +75,17 @@ pub struct ServerConfig {
     pub body_timeout_s: f64,
     /// Seconds a connection without a request in progress stays open after its last activity.
     pub idle_timeout_s: f64,
+    /// Running episodes at most, in all (each holds its engine state in memory).
+    pub max_running: usize,
+    /// Running episodes at most per token (servers with tokens; an open server has one caller).
+    pub max_running_per_token: usize,
 }
+
+/// Default of [`ServerConfig::max_running`]: ~8 GB of engine state on a 100k-triangle object
+/// with a 300k-point ground truth (~62 MB per running episode; `objview bench serve` prints it).
+pub const DEFAULT_MAX_RUNNING: usize = 128;
+/// Default of [`ServerConfig::max_running_per_token`].
+pub const DEFAULT_MAX_RUNNING_PER_TOKEN: usize = 64;
 
 impl Default for ServerConfig {
     fn default() -> Self {
@@ -93,6 +103,8 @@ impl Default for ServerConfig {
             header_timeout_s: conn::DEFAULT_HEADER_TIMEOUT_S,
             body_timeout_s: conn::DEFAULT_BODY_TIMEOUT_S,
             idle_timeout_s: conn::DEFAULT_IDLE_TIMEOUT_S,
+            max_running: DEFAULT_MAX_RUNNING,
+            max_running_per_token: DEFAULT_MAX_RUNNING_PER_TOKEN,
         }
     }
 }
@@ -108,8 +120,14 @@ fn seconds(name: &str, s: f64) -> Result<Duration, ServerError> {
 /// Loads the pool, opens the database, reads the tokens and finishes the episodes a previous
 /// server left running (replayed, ended `exception` / `interrupted`).
 pub fn build_state(cfg: &ServerConfig) -> Result<Arc<AppState>, ServerError> {
-    if cfg.max_connections == 0 {
-        return Err(ServerError::Config("--max-connections must be at least 1".into()));
+    for (name, n) in [
+        ("--max-connections", cfg.max_connections),
+        ("--max-running", cfg.max_running),
+        ("--max-running-per-token", cfg.max_running_per_token),
+    ] {
+        if n == 0 {
+            return Err(ServerError::Config(format!("{name} must be at least 1")));
+        }
     }
     let fd_limit = conn::descriptor_limit();
     let max_connections = conn::fit_descriptor_limit(cfg.max_connections, fd_limit);
@@ -126,6 +144,8 @@ pub fn build_state(cfg: &ServerConfig) -> Result<Arc<AppState>, ServerError> {
         action_timeout: seconds("--action-timeout", cfg.action_timeout_s)?,
         start_timeout: seconds("--start-timeout", cfg.start_timeout_s)?,
         body_timeout: seconds("--body-timeout", cfg.body_timeout_s)?,
+        max_running: cfg.max_running,
+        max_running_per_token: cfg.max_running_per_token,
         conn: conn::ConnLimits {
             max_connections,
             header_timeout: seconds("--header-timeout", cfg.header_timeout_s)?,

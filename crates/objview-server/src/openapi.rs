@@ -99,7 +99,7 @@ pub fn document() -> Value {
                     "required": ["code", "message"], "properties": {"code": {"type": "string", "enum": [
                         "malformed_json", "invalid_request", "unauthorized", "not_found", "method_not_allowed",
                         "stale_step", "episode_finished", "episode_running", "payload_too_large", "request_timeout",
-                        "internal", "overloaded"]},
+                        "too_many_episodes", "internal", "overloaded"]},
                         "message": {"type": "string"}}}}},
             },
             "responses": {"Error": {"description": "an error", "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Error"}}}}},
@@ -130,7 +130,7 @@ pub fn document() -> Value {
                 "post": op("create an episode (takes the start view)", vec![],
                 Some(json_body(json!({"$ref": "#/components/schemas/CreateEpisode"}))),
                 ("201", ok("{episode_id, object_id, split, view_space, budget, seed, candidate_set, start_pose, intrinsics, action_timeout_s, observation}", any.clone())),
-                &["400", "401", "404", "408", "413", "422", "500"])},
+                &["400", "401", "404", "408", "413", "422", "429", "500"])},
             "/v1/episodes/{id}": {"get": op("episode state (metrics only on public splits)", vec![id_param()], None,
                 ("200", ok("{episode_id, object_id, split, view_space, budget, method, state, step, views, history, terminal}", any.clone())), &ep_errs)},
             "/v1/episodes/{id}/observation": {"get": op("the current observation's metadata", vec![id_param()], None,

@@ -244,6 +244,10 @@ pub struct Limits {
     pub start_timeout: Duration,
     /// Wait for a request body once its head arrived (408 after it).
     pub body_timeout: Duration,
+    /// Running episodes at most, in all.
+    pub max_running: usize,
+    /// Running episodes at most per owner (token), on a server with tokens.
+    pub max_running_per_token: usize,
     /// Connection cap and the header and idle limits ([`crate::conn`]).
     pub conn: crate::conn::ConnLimits,
 }
@@ -269,6 +273,17 @@ pub struct AppState {
     candidate_sets: BTreeMap<String, Arc<Vec<Pose>>>,
     spaces: BTreeMap<String, ViewSpace>,
     episodes: Mutex<HashMap<String, Arc<Slot>>>,
+    /// Running episodes, in all and per owner: a place is taken when a create starts and given
+    /// back when it fails or when the episode finishes ([`AppState::finish`], the one way out
+    /// of running).
+    running: Mutex<RunningCount>,
+}
+
+/// See [`AppState::running`].
+#[derive(Debug, Default)]
+struct RunningCount {
+    total: usize,
+    by_owner: HashMap<String, usize>,
 }
 
 /// A fresh episode id: `e-` and 16 random hex digits.
@@ -311,6 +326,7 @@ impl AppState {
             candidate_sets,
             spaces,
             episodes: Mutex::default(),
+            running: Mutex::default(),
         };
         state.recover()?;
         Ok(state)
@@ -400,6 +416,52 @@ impl AppState {
         self.scenes.get(obj, &spec.view_space).map_err(|e| internal("preparing the object", e))
     }
 
+    /// 429 `too_many_episodes` when a new episode of `owner` would exceed a cap on running
+    /// episodes (`take`: and then takes its place, which [`AppState::release_running`] gives
+    /// back).
+    pub fn check_running(&self, owner: &str, take: bool) -> Result<(), ApiError> {
+        let mut r = lock(&self.running);
+        let (max, per) = (self.limits.max_running, self.limits.max_running_per_token);
+        if r.total >= max {
+            return Err(ApiError::TooManyEpisodes(format!(
+                "{} episodes are running, the server's limit (--max-running {max}); finish or abort \
+                 one, or wait for the time limits of idle ones",
+                r.total
+            )));
+        }
+        let mine = r.by_owner.get(owner).copied().unwrap_or(0);
+        if self.tokens.is_some() && mine >= per {
+            return Err(ApiError::TooManyEpisodes(format!(
+                "{mine} episodes of this token are running, the server's limit per token \
+                 (--max-running-per-token {per}); finish or abort one, or wait for the time limits \
+                 of idle ones"
+            )));
+        }
+        if take {
+            r.total += 1;
+            *r.by_owner.entry(owner.to_string()).or_default() += 1;
+        }
+        Ok(())
+    }
+
+    /// Gives back a place taken by [`AppState::check_running`].
+    fn release_running(&self, owner: &str) {
+        let mut r = lock(&self.running);
+        r.total = r.total.saturating_sub(1);
+        if let Some(n) = r.by_owner.get_mut(owner) {
+            *n -= 1;
+            if *n == 0 {
+                r.by_owner.remove(owner);
+            }
+        }
+    }
+
+    /// Running episodes: in all, and of `owner`.
+    pub fn running_count(&self, owner: &str) -> (usize, usize) {
+        let r = lock(&self.running);
+        (r.total, r.by_owner.get(owner).copied().unwrap_or(0))
+    }
+
     /// Builds the episode of `spec` on its prepared `scene` (takes and scores the start view)
     /// and the settings record of its result.
     fn prepare(&self, spec: &CreateSpec, scene: Arc<Scene>) -> Result<(Episode, Value), ApiError> {
@@ -450,6 +512,16 @@ impl AppState {
     /// `POST /v1/episodes`: starts an episode on `scene` ([`AppState::scene_for`]), takes its
     /// start view, stores it; the 201 body.
     pub fn create(&self, owner: &str, spec: CreateSpec, scene: Arc<Scene>) -> Result<Value, ApiError> {
+        self.check_running(owner, true)?;
+        let created = self.create_running(owner, spec, scene);
+        if created.is_err() {
+            self.release_running(owner);
+        }
+        created
+    }
+
+    /// [`AppState::create`] once the episode's running place is taken.
+    fn create_running(&self, owner: &str, spec: CreateSpec, scene: Arc<Scene>) -> Result<Value, ApiError> {
         let (ep, record) = self.prepare(&spec, scene)?;
         let id = new_id();
         let row = EpisodeRow {
@@ -519,6 +591,7 @@ impl AppState {
         let Live::Running(r) = std::mem::replace(live, Live::Finished(None)) else {
             return Err(ApiError::Internal("the episode had already finished".into()));
         };
+        self.release_running(&slot.owner);
         let r = *r;
         let res = r.ep.finish(r.record);
         let line = result_line(&slot.id, &res);

@@ -412,3 +412,71 @@ fn an_oversized_body_gets_its_413_before_the_connection_closes() {
     assert_eq!(status, 413, "{}", String::from_utf8_lossy(&body));
     assert!(closed_within(&mut raw, Duration::from_secs(5)).is_some());
 }
+
+/// A client that creates episodes and never acts cannot fill the server's memory: every
+/// running episode holds its engine state, so creates beyond `--max-running` (in all) and
+/// `--max-running-per-token` get 429 `too_many_episodes` at once, and a place comes back when an
+/// episode ends — by its last action, an abort or its time limit.
+#[test]
+fn running_episodes_are_capped_in_all_and_per_token() {
+    let (s, _tmp) = start_with(|c| {
+        let tokens = c.db.with_file_name("tokens.txt");
+        std::fs::write(&tokens, "tok-a alice\ntok-b bob\ntok-c carol\n").unwrap();
+        c.tokens = Some(tokens);
+        c.max_running = 3;
+        c.max_running_per_token = 2;
+        c.start_timeout_s = 1.5;
+    });
+    let (alice, bob, carol) = (
+        Client::new(&s.url(), Some("tok-a")),
+        Client::new(&s.url(), Some("tok-b")),
+        Client::new(&s.url(), Some("tok-c")),
+    );
+    let body = create_body("cube", "whole", json!(2));
+    let id = |v: &Value| v["episode_id"].as_str().unwrap().to_string();
+    let a1 = id(&create(&alice, &body));
+    let _a2 = id(&create(&alice, &body));
+    // Alice's own limit; Bob still gets in.
+    let r = post(&alice, "/v1/episodes", &body);
+    assert_error(&r, 429, "too_many_episodes");
+    assert!(
+        String::from_utf8_lossy(&r.body).contains("--max-running-per-token 2"),
+        "{}",
+        String::from_utf8_lossy(&r.body)
+    );
+    let b1 = id(&create(&bob, &body));
+    // The server's limit: three are running.
+    let r = post(&carol, "/v1/episodes", &body);
+    assert_error(&r, 429, "too_many_episodes");
+    assert!(
+        String::from_utf8_lossy(&r.body).contains("--max-running 3"),
+        "{}",
+        String::from_utf8_lossy(&r.body)
+    );
+    // An abort gives a place back.
+    assert_eq!(post(&alice, &format!("/v1/episodes/{a1}/abort"), &json!({"detail": "done"})).status, 200);
+    let c1 = id(&create(&carol, &body));
+    assert_error(&post(&carol, "/v1/episodes", &body), 429, "too_many_episodes");
+    // The last action of a budget gives a place back (budget 2: two moves, then stop).
+    for (step, d) in [[1.0, 0.0, 0.2], [0.0, 1.0, 0.2]].into_iter().enumerate() {
+        assert_eq!(
+            post(&bob, &format!("/v1/episodes/{b1}/actions"), &action(step, mv(pose_dir(d)))).status,
+            200
+        );
+    }
+    let stop = json!({"step": 2, "action": {"type": "stop", "reason": "plan_end"}});
+    let r = post(&bob, &format!("/v1/episodes/{b1}/actions"), &stop);
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    assert_eq!(get(&bob, &format!("/v1/episodes/{b1}")).json()["state"], "finished");
+    let _b2 = id(&create(&bob, &body));
+    // The time limit (1.5 s without a first action) ends the idle ones: every place comes back.
+    let t = std::time::Instant::now();
+    loop {
+        if post(&carol, "/v1/episodes", &body).status == 201 {
+            break;
+        }
+        assert!(t.elapsed() < Duration::from_secs(60), "no place came back after the time limits");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let _ = c1;
+}

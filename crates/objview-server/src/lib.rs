@@ -82,7 +82,7 @@ pub struct ServerConfig {
 }
 
 /// Default of [`ServerConfig::max_running`]: ~8 GB of engine state on a 100k-triangle object
-/// with a 300k-point ground truth (~62 MB per running episode; `objview bench serve` prints it).
+/// with a 300k-point ground truth (55–66 MB per running episode; `objview bench serve` prints it).
 pub const DEFAULT_MAX_RUNNING: usize = 128;
 /// Default of [`ServerConfig::max_running_per_token`].
 pub const DEFAULT_MAX_RUNNING_PER_TOKEN: usize = 64;

@@ -417,7 +417,7 @@ impl AppState {
     }
 
     /// 429 `too_many_episodes` when a new episode of `owner` would exceed a cap on running
-    /// episodes (`take`: and then takes its place, which [`AppState::release_running`] gives
+    /// episodes (`take`: and then takes its place, which `AppState::release_running` gives
     /// back).
     pub fn check_running(&self, owner: &str, take: bool) -> Result<(), ApiError> {
         let mut r = lock(&self.running);

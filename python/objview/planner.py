@@ -22,6 +22,7 @@ import concurrent.futures
 import copy
 import logging
 import threading
+import time
 from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple, Union
 
 from .client import (
@@ -32,6 +33,7 @@ from .client import (
     iter_objects,
     pose_to_json,
 )
+from .errors import TooManyEpisodes
 from .types import Result
 
 __all__ = ["Planner", "action_to_json", "run_episode", "run_planner", "summary_line"]
@@ -99,6 +101,13 @@ def run_episode(
         return episode.result()
 
 
+#: How long :func:`run_planner` keeps asking for a place on a full server (seconds).
+CREATE_WAIT_MAX_S = 600.0
+#: The first wait before asking again; it doubles up to :data:`CREATE_RETRY_MAX_S`.
+CREATE_RETRY_FIRST_S = 0.25
+CREATE_RETRY_MAX_S = 4.0
+
+
 def run_planner(
     client: Client,
     planner: Any,
@@ -132,6 +141,11 @@ def run_planner(
     the client is shared — it is thread-safe).  The results are the same as a sequential run's:
     each episode depends on its own seed only (record_timings aside).
 
+    A full server (``TooManyEpisodes``: its cap on running episodes, in all or of this token,
+    is reached — more ``workers`` than it allows) is waited for: the create is asked again after
+    0.25 s, doubling to 4 s, for up to :data:`CREATE_WAIT_MAX_S` seconds, as ``objview run
+    --server`` does.
+
     An exception — in the planner, a protocol error, ``KeyboardInterrupt`` — aborts the episode
     it happened in (source ``exception``, reason ``planner_error``, its views scored) and any
     other episode of the run still going, then propagates; no episode is left running.
@@ -145,21 +159,35 @@ def run_planner(
     objs = iter_objects(client, split, objects)
     lock = threading.Lock()
 
+    def create(obj: Any, cancel: Optional[threading.Event]) -> Episode:
+        started, wait = time.monotonic(), CREATE_RETRY_FIRST_S
+        while True:
+            try:
+                return client.create_episode(
+                    split,
+                    obj,
+                    view_space=view_space,
+                    budget=budget,
+                    method=str(method),
+                    family=str(family),
+                    execution_mode=str(execution_mode),
+                    candidate_set=candidate_set,
+                    seed=seed,
+                    params=params,
+                    record_timings=record_timings,
+                    eager_depth=eager_depth,
+                )
+            except TooManyEpisodes:
+                if time.monotonic() - started + wait > CREATE_WAIT_MAX_S:
+                    raise
+            if cancel is not None and cancel.wait(wait):
+                raise Cancelled("another episode of this run failed")
+            if cancel is None:
+                time.sleep(wait)
+            wait = min(2 * wait, CREATE_RETRY_MAX_S)
+
     def one(p: Any, i: int, obj: Any, cancel: Optional[threading.Event]) -> Result:
-        ep = client.create_episode(
-            split,
-            obj,
-            view_space=view_space,
-            budget=budget,
-            method=str(method),
-            family=str(family),
-            execution_mode=str(execution_mode),
-            candidate_set=candidate_set,
-            seed=seed,
-            params=params,
-            record_timings=record_timings,
-            eager_depth=eager_depth,
-        )
+        ep = create(obj, cancel)
         res = run_episode(p, ep, cancel)
         with lock:
             if callable(progress):

@@ -8,7 +8,7 @@ use std::cell::RefCell;
 use std::collections::HashMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use objview_episode::{Action, Budget, Environment, EpisodeContext, EpisodeResult, Observation, Planner};
 use objview_geom::Pose;
@@ -397,11 +397,39 @@ pub fn create_request(planner: &dyn Planner, ep: &RemoteEpisode) -> Value {
     })
 }
 
+/// How long [`run_remote`] keeps asking for a place while the server's cap on running episodes
+/// is reached (429 `too_many_episodes`): places come back as episodes end, at the latest at the
+/// server's time limits (a 300 s start limit by default).
+pub const CREATE_WAIT_MAX: Duration = Duration::from_secs(600);
+/// The first wait before asking again; it doubles up to [`CREATE_RETRY_MAX`].
+const CREATE_RETRY_FIRST: Duration = Duration::from_millis(250);
+const CREATE_RETRY_MAX: Duration = Duration::from_secs(4);
+
+/// `POST /v1/episodes`, asked again while the server answers 429 `too_many_episodes` (a full
+/// server: wait for a place, up to [`CREATE_WAIT_MAX`]); any other answer is returned as it is.
+pub fn create_waiting(client: &Client, request: &Value) -> Result<Value, ClientError> {
+    let started = Instant::now();
+    let mut wait = CREATE_RETRY_FIRST;
+    loop {
+        match client.create(request) {
+            Err(ClientError::Api { status: 429, ref code, .. })
+                if code == "too_many_episodes" && started.elapsed() + wait <= CREATE_WAIT_MAX =>
+            {
+                std::thread::sleep(wait);
+                wait = (wait * 2).min(CREATE_RETRY_MAX);
+            }
+            answer => return answer,
+        }
+    }
+}
+
 /// Plays one episode of `planner` on the server and returns its result line (with its newline,
 /// as [`objview_dataset::to_line`]). `candidates` are
 /// the poses of `ep.candidate_set` (fetch them once with [`Client::candidate_set`]). A planner
 /// that fails or panics ends the episode with `exception` / `planner_error` (through `abort`), as
-/// locally. The oracle (it reads ground truth) cannot run remotely.
+/// locally. The oracle (it reads ground truth) cannot run remotely. A full server (429
+/// `too_many_episodes`) is waited for ([`create_waiting`]), so that a run with more threads than
+/// the server's caps allow finishes every object instead of failing some.
 pub fn run_remote(
     client: &Client,
     planner: &mut dyn Planner,
@@ -414,7 +442,7 @@ pub fn run_remote(
             planner.name()
         )));
     }
-    let created = client.create(&create_request(planner, ep))?;
+    let created = create_waiting(client, &create_request(planner, ep))?;
     let id = created["episode_id"].as_str().ok_or_else(|| protocol("no episode_id"))?.to_string();
     let intr = &created["intrinsics"];
     let num = |k: &str| intr[k].as_f64().ok_or_else(|| protocol(format!("intrinsics.{k}")));

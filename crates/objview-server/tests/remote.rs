@@ -207,3 +207,30 @@ fn poses_beyond_the_bound_are_infeasible_remotely_as_locally() {
     assert_eq!(v["terminal_reason"], "plan_end", "{}", v["terminal_detail"]);
     assert_eq!(v["visited_poses"].as_array().unwrap().len(), 2);
 }
+
+/// A full server (its cap on running episodes reached) is waited for: the remote runner asks
+/// again until a place comes back, then writes the same line as a local run.
+#[test]
+fn a_remote_run_waits_for_a_place_on_a_full_server() {
+    let (mut cfg, _tmp) = config();
+    cfg.max_running = 1;
+    let s = start(&cfg);
+    let c = client(&s);
+    // Another client holds the only place.
+    let held = c
+        .create(&serde_json::json!({"split": "hidden", "object": "octahedron", "view_space": "whole",
+        "budget": 5, "method": "holder"}))
+        .unwrap();
+    let held = held["episode_id"].as_str().unwrap().to_string();
+    let url = s.url();
+    let runner = std::thread::spawn(move || {
+        let c = Client::new(&url, None);
+        remote_line(&c, planner("random-tsp", &[]).as_mut(), "cube", "quarter", Budget::Fixed(5), 7)
+    });
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    assert!(!runner.is_finished(), "the runner went ahead while the only place was taken");
+    assert_eq!(c.raw("POST", &format!("/v1/episodes/{held}/abort"), Some(b"{}")).unwrap().status, 200);
+    let remote = runner.join().unwrap().expect("the runner gets the freed place");
+    let local = local_line(planner("random-tsp", &[]).as_mut(), "cube", "quarter", Budget::Fixed(5), 7);
+    assert_eq!(remote, local);
+}

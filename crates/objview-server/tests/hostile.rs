@@ -434,25 +434,20 @@ fn running_episodes_are_capped_in_all_and_per_token() {
     );
     let body = create_body("cube", "whole", json!(2));
     let id = |v: &Value| v["episode_id"].as_str().unwrap().to_string();
+    // A refused create: 429 `too_many_episodes`, naming the limit that refused it.
+    let refused = |c: &Client, limit: &str| {
+        let r = post(c, "/v1/episodes", &body);
+        assert_error(&r, 429, "too_many_episodes");
+        let text = String::from_utf8_lossy(&r.body);
+        assert!(text.contains(limit), "{limit}: {text}");
+    };
     let a1 = id(&create(&alice, &body));
     let _a2 = id(&create(&alice, &body));
     // Alice's own limit; Bob still gets in.
-    let r = post(&alice, "/v1/episodes", &body);
-    assert_error(&r, 429, "too_many_episodes");
-    assert!(
-        String::from_utf8_lossy(&r.body).contains("--max-running-per-token 2"),
-        "{}",
-        String::from_utf8_lossy(&r.body)
-    );
+    refused(&alice, "--max-running-per-token 2");
     let b1 = id(&create(&bob, &body));
     // The server's limit: three are running.
-    let r = post(&carol, "/v1/episodes", &body);
-    assert_error(&r, 429, "too_many_episodes");
-    assert!(
-        String::from_utf8_lossy(&r.body).contains("--max-running 3"),
-        "{}",
-        String::from_utf8_lossy(&r.body)
-    );
+    refused(&carol, "--max-running 3");
     // An abort gives a place back.
     assert_eq!(post(&alice, &format!("/v1/episodes/{a1}/abort"), &json!({"detail": "done"})).status, 200);
     let c1 = id(&create(&carol, &body));

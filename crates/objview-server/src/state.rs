@@ -286,6 +286,28 @@ struct RunningCount {
     by_owner: HashMap<String, usize>,
 }
 
+/// A running place taken for a create: given back on drop unless kept (the episode then holds
+/// it until [`AppState::finish`]).
+struct Place<'a> {
+    state: &'a AppState,
+    owner: &'a str,
+    kept: bool,
+}
+
+impl Place<'_> {
+    fn keep(mut self) {
+        self.kept = true;
+    }
+}
+
+impl Drop for Place<'_> {
+    fn drop(&mut self) {
+        if !self.kept {
+            self.state.release_running(self.owner);
+        }
+    }
+}
+
 /// A fresh episode id: `e-` and 16 random hex digits.
 fn new_id() -> String {
     format!("e-{:016x}", rand::random::<u64>())
@@ -456,12 +478,6 @@ impl AppState {
         }
     }
 
-    /// Running episodes: in all, and of `owner`.
-    pub fn running_count(&self, owner: &str) -> (usize, usize) {
-        let r = lock(&self.running);
-        (r.total, r.by_owner.get(owner).copied().unwrap_or(0))
-    }
-
     /// Builds the episode of `spec` on its prepared `scene` (takes and scores the start view)
     /// and the settings record of its result.
     fn prepare(&self, spec: &CreateSpec, scene: Arc<Scene>) -> Result<(Episode, Value), ApiError> {
@@ -513,11 +529,11 @@ impl AppState {
     /// start view, stores it; the 201 body.
     pub fn create(&self, owner: &str, spec: CreateSpec, scene: Arc<Scene>) -> Result<Value, ApiError> {
         self.check_running(owner, true)?;
-        let created = self.create_running(owner, spec, scene);
-        if created.is_err() {
-            self.release_running(owner);
-        }
-        created
+        // Given back unless the episode is stored as running — also if the engine panics.
+        let place = Place { state: self, owner, kept: false };
+        let created = self.create_running(owner, spec, scene)?;
+        place.keep();
+        Ok(created)
     }
 
     /// [`AppState::create`] once the episode's running place is taken.

@@ -180,10 +180,10 @@ def run_planner(
             except TooManyEpisodes:
                 if time.monotonic() - started + wait > CREATE_WAIT_MAX_S:
                     raise
-            if cancel is not None and cancel.wait(wait):
-                raise Cancelled("another episode of this run failed")
             if cancel is None:
                 time.sleep(wait)
+            elif cancel.wait(wait):
+                raise Cancelled("another episode of this run failed")
             wait = min(2 * wait, CREATE_RETRY_MAX_S)
 
     def one(p: Any, i: int, obj: Any, cancel: Optional[threading.Event]) -> Result:

@@ -310,7 +310,7 @@ async fn create(State(st): State<Arc<AppState>>, c: Caller, Body(body): Body) ->
     let spec = CreateSpec::parse(&body, &st.pool)?;
     // A full server answers at once, before any scene or engine work (the place itself is
     // taken inside `create`, under the same check).
-    st.check_running(&c.owner, false)?;
+    st.check_running(&c.owner)?;
     // The prepared scene first, outside the engine gate: a scene being built (seconds, once per
     // object) keeps no core's permit from the steps of running episodes, and concurrent creates
     // of one object wait for that one build on the blocking pool, not in the gate's queue.

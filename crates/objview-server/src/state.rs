@@ -439,10 +439,23 @@ impl AppState {
     }
 
     /// 429 `too_many_episodes` when a new episode of `owner` would exceed a cap on running
-    /// episodes (`take`: and then takes its place, which `AppState::release_running` gives
-    /// back).
-    pub fn check_running(&self, owner: &str, take: bool) -> Result<(), ApiError> {
+    /// episodes (a check only: [`AppState::create`] takes the place).
+    pub fn check_running(&self, owner: &str) -> Result<(), ApiError> {
+        self.room_for(&lock(&self.running), owner)
+    }
+
+    /// The running place of a new episode of `owner`, checked and taken under one lock.
+    fn take_place<'a>(&'a self, owner: &'a str) -> Result<Place<'a>, ApiError> {
         let mut r = lock(&self.running);
+        self.room_for(&r, owner)?;
+        r.total += 1;
+        *r.by_owner.entry(owner.to_string()).or_default() += 1;
+        Ok(Place { state: self, owner, kept: false })
+    }
+
+    /// Ok when a new episode of `owner` fits under the caps, given the running count `r`; else
+    /// the 429 that says which cap refuses it.
+    fn room_for(&self, r: &RunningCount, owner: &str) -> Result<(), ApiError> {
         let (max, per) = (self.limits.max_running, self.limits.max_running_per_token);
         if r.total >= max {
             return Err(ApiError::TooManyEpisodes(format!(
@@ -459,14 +472,10 @@ impl AppState {
                  of idle ones"
             )));
         }
-        if take {
-            r.total += 1;
-            *r.by_owner.entry(owner.to_string()).or_default() += 1;
-        }
         Ok(())
     }
 
-    /// Gives back a place taken by [`AppState::check_running`].
+    /// Gives back a place taken by [`AppState::take_place`].
     fn release_running(&self, owner: &str) {
         let mut r = lock(&self.running);
         r.total = r.total.saturating_sub(1);
@@ -528,9 +537,8 @@ impl AppState {
     /// `POST /v1/episodes`: starts an episode on `scene` ([`AppState::scene_for`]), takes its
     /// start view, stores it; the 201 body.
     pub fn create(&self, owner: &str, spec: CreateSpec, scene: Arc<Scene>) -> Result<Value, ApiError> {
-        self.check_running(owner, true)?;
         // Given back unless the episode is stored as running — also if the engine panics.
-        let place = Place { state: self, owner, kept: false };
+        let place = self.take_place(owner)?;
         let created = self.create_running(owner, spec, scene)?;
         place.keep();
         Ok(created)

@@ -169,14 +169,14 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
     let concurrent = a.clients.min(report.episodes);
     let memory_json = memory.map(|(warm, peak)| {
         let per = objview_runs::bench::memory_per_episode(warm, peak, concurrent);
-        let mb = |b: f64| b / (1024.0 * 1024.0);
+        let mib = |b: f64| b / (1024.0 * 1024.0);
         println!(
-            "  memory (server and clients, one process): peak RSS {:.0} MB; {:.0} MB after the warm-up episode (scene built){}",
-            mb(peak as f64),
-            mb(warm as f64),
+            "  memory (server and clients, one process): peak RSS {:.0} MiB; {:.0} MiB after the warm-up episode (scene built){}",
+            mib(peak as f64),
+            mib(warm as f64),
             per.map_or(String::new(), |p| format!(
-                ", so ≈ {:.1} MB per further concurrent episode ({concurrent} at once)",
-                mb(p)
+                ", so ≈ {:.1} MiB per further concurrent episode ({concurrent} at once)",
+                mib(p)
             ))
         );
         json!({"peak_rss_bytes": peak, "warm_peak_rss_bytes": warm, "concurrent_episodes": concurrent,

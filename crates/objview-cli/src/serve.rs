@@ -60,7 +60,7 @@ pub struct Args {
     /// Seconds a connection with no request in progress stays open after its last activity.
     #[arg(long, default_value_t = objview_server::conn::DEFAULT_IDLE_TIMEOUT_S)]
     pub idle_timeout: f64,
-    /// Running episodes at most, in all: each holds its engine state in memory (55–66 MB on a
+    /// Running episodes at most, in all: each holds its engine state in memory (55–66 MiB on a
     /// 100k-triangle object with a 300k-point ground truth; `objview bench serve` prints it).
     /// A create beyond it gets 429 `too_many_episodes`.
     #[arg(long, default_value_t = objview_server::DEFAULT_MAX_RUNNING)]

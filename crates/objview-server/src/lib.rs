@@ -81,8 +81,9 @@ pub struct ServerConfig {
     pub max_running_per_token: usize,
 }
 
-/// Default of [`ServerConfig::max_running`]: ~8 GB of engine state on a 100k-triangle object
-/// with a 300k-point ground truth (55–66 MB per running episode; `objview bench serve` prints it).
+/// Default of [`ServerConfig::max_running`]: 7–8 GiB of engine state on a 100k-triangle object
+/// with a 300k-point ground truth (55–66 MiB per running episode; `objview bench serve` prints
+/// it).
 pub const DEFAULT_MAX_RUNNING: usize = 128;
 /// Default of [`ServerConfig::max_running_per_token`].
 pub const DEFAULT_MAX_RUNNING_PER_TOKEN: usize = 64;

@@ -19,8 +19,11 @@
 //! a fused point never leaves its voxel, so once an occupied voxel lies entirely within the
 //! smallest τ of a target, that target is covered at every τ for the rest of the episode and
 //! is never looked at again. On observed surfaces that happens at the first view that sees
-//! them (the target's own voxel is within h√3 ≈ 0.0087 < 0.01 of all its points), and such a
-//! target is settled before any search: its own voxel's slot is its witness.
+//! them (the target's own voxel is within h√3 ≈ 0.0087 < 0.01 of all its points). Such a
+//! target is settled before any search: each target knows which of the 27 voxels around it lie
+//! entirely within τ_min of it (computed once per scene), and the first occupied one — its own
+//! voxel, or a neighbour where the view left its own voxel empty (pixels are ~1.4 voxels wide
+//! at the SPEC's distance) — gives the witness slot.
 //!
 //! The searching targets of a block scan the changed groups together, group by group, in the
 //! order and with the running bounds a per-target walk would use (same answers), so that each
@@ -30,9 +33,10 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use crate::fusion::FusedCloud;
+use crate::fusion::{FusedBlock, FusedCloud};
 use crate::grid::{
-    box_box_dist2, cell_of_key, dist2, keyed_points, local_index, Aabb, ChangedBlocks, Domain, NONE,
+    box_box_dist2, cell_of_key, dist2, keyed_points, local_index, Aabb, ChangedBlocks, Domain, BLOCK,
+    BLOCK_SHIFT, NONE,
 };
 
 /// Safety margin (units²) of the retirement test: a voxel counts as inside the ball only with
@@ -51,7 +55,24 @@ struct Index {
     /// voxel lies entirely within τ_min of it (less the margin), so that an update need not
     /// compute the point's key again (three divisions and floors per live target and step).
     own: Vec<u16>,
+    /// Per point: which of the 27 fine voxels around its own (bit [`near_bit`]) lie entirely
+    /// within τ_min of it (less the margin). Any of them occupied covers the point at every τ
+    /// for good, so an update retires it without a search. At the SPEC's τ_min = 0.01 = 2h no
+    /// voxel outside this neighbourhood qualifies (a voxel two cells away along an axis has a
+    /// corner at least √(2² + ½² + ½²)·h ≈ 2.1h from any point of the own voxel); with a
+    /// larger τ_min the farther ones still retire a target, after its search
+    /// ([`Coverage::permanent`]).
+    near: Vec<u32>,
 }
+
+/// The bit of the fine voxel at offset `d` (each −1, 0 or 1 per axis) in [`Index::near`].
+#[inline]
+fn near_bit(d: [i32; 3]) -> u32 {
+    ((d[0] + 1) + 3 * (d[1] + 1) + 9 * (d[2] + 1)) as u32
+}
+
+/// The own voxel's bit in [`Index::near`].
+const NEAR_OWN: u32 = 13;
 
 /// The flag of [`Index::own`]: the point's own voxel, once occupied, retires it.
 const OWN_RETIRES: u16 = 1 << 15;
@@ -135,9 +156,27 @@ impl Coverage {
                 local_index(k) as u16 | flag
             })
             .collect();
+        let near = pts
+            .iter()
+            .map(|&p| {
+                let k = domain.key(p);
+                let mut m = 0u32;
+                for dz in -1..=1 {
+                    for dy in -1..=1 {
+                        for dx in -1..=1 {
+                            let kk = [k[0] + dx, k[1] + dy, k[2] + dz];
+                            if max_corner_d2(domain.h, kk, p) < retire2 {
+                                m |= 1 << near_bit([dx, dy, dz]);
+                            }
+                        }
+                    }
+                }
+                m
+            })
+            .collect();
         Ok(Coverage {
             live_blocks: (0..blocks.len() as u32).collect(),
-            ix: Arc::new(Index { domain, pts, blocks, own }),
+            ix: Arc::new(Index { domain, pts, blocks, own, near }),
             counts: vec![0; t2.len()],
             t2,
             r2,
@@ -261,9 +300,15 @@ impl Coverage {
         }
         sc.cand.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         let epoch = fused.epoch();
-        // The fused block of this target block: a target whose own voxel is occupied and lies
-        // entirely within τ_min of it retires at once (its slot is a witness), with no search.
-        let own_block = domain.block_index(key).and_then(|b| fused.block_at(b));
+        // The fused blocks around this target block (3×3×3, by block offset): a target with an
+        // occupied voxel among those of its neighbourhood that lie entirely within τ_min of it
+        // ([`Index::near`]) retires at once, that voxel's slot its witness, with no search.
+        let around: [Option<&FusedBlock>; 27] = std::array::from_fn(|b| {
+            let o = near_offset(b as u32);
+            domain
+                .block_index([key[0] + o[0], key[1] + o[1], key[2] + o[2]])
+                .and_then(|bi| fused.block_at(bi))
+        });
         sc.who.clear();
         sc.best.clear();
         sc.xyz.iter_mut().for_each(Vec::clear);
@@ -275,16 +320,11 @@ impl Coverage {
             let iu = i as usize;
             let p = self.ix.pts[iu];
             let (old, old_nn) = (self.d2[iu], self.nn[iu]);
-            if let Some(fb) = own_block {
-                let own = self.ix.own[iu];
-                if own & OWN_RETIRES != 0 {
-                    let s = fb.slot((own & !OWN_RETIRES) as usize);
-                    if s != NONE {
-                        let d2 = dist2(p, fused.pos[s as usize]);
-                        out.push(Change { target: i, d2, nn: s, retire: true });
-                        continue;
-                    }
-                }
+            let s = witness(&around, (self.ix.own[iu] & !OWN_RETIRES) as usize, self.ix.near[iu]);
+            if s != NONE {
+                let d2 = dist2(p, fused.pos[s as usize]);
+                out.push(Change { target: i, d2, nn: s, retire: true });
+                continue;
             }
             let moved = old_nn != NONE && fused.stamp[old_nn as usize] == epoch;
             if old < self.tmin2 {
@@ -379,12 +419,53 @@ impl Coverage {
         out
     }
 
-    /// Whether the voxel of `p`'s nearest slot `nn` lies entirely within τ_min of `p`. (Its
-    /// own voxel needs no test here: [`Coverage::block_changes`] tests it first, against the
-    /// same fused cloud, and retires the target at once when it passes.)
+    /// Whether the voxel of `p`'s nearest slot `nn` lies entirely within τ_min of `p`. (The
+    /// voxels around `p`'s own need no test here: [`Coverage::block_changes`] tests them
+    /// first, against the same fused cloud, and retires the target at once when one passes; so
+    /// this decides only for a τ_min above 2h, where voxels farther out can pass.)
     fn permanent(&self, fused: &FusedCloud, p: [f64; 3], nn: u32) -> bool {
         nn != NONE && max_corner_d2(self.ix.domain.h, fused.key[nn as usize], p) < self.retire2
     }
+}
+
+/// The offset (−1, 0 or 1 per axis) of bit `b` of [`Index::near`] (inverse of [`near_bit`]).
+#[inline]
+fn near_offset(b: u32) -> [i32; 3] {
+    [(b % 3) as i32 - 1, (b / 3 % 3) as i32 - 1, (b / 9) as i32 - 1]
+}
+
+/// The slot of an occupied voxel among the neighbours `mask` ([`Index::near`]) of the fine
+/// voxel with local index `li` in the middle block of `around` (the fused blocks of the
+/// 3×3×3 block neighbourhood, by [`near_bit`] of the block offset), or NONE: the own voxel
+/// first, then by ascending bit, so the witness does not depend on anything but the cloud.
+#[inline]
+fn witness(around: &[Option<&FusedBlock>; 27], li: usize, mask: u32) -> u32 {
+    let m = BLOCK - 1;
+    let c0 = [li as i32 & m, li as i32 >> BLOCK_SHIFT & m, li as i32 >> (2 * BLOCK_SHIFT)];
+    let own = 1u32 << NEAR_OWN;
+    if mask & own != 0 {
+        if let Some(fb) = around[NEAR_OWN as usize] {
+            let s = fb.slot(li);
+            if s != NONE {
+                return s;
+            }
+        }
+    }
+    let mut rest = mask & !own;
+    while rest != 0 {
+        let d = near_offset(rest.trailing_zeros());
+        rest &= rest - 1;
+        let c = [c0[0] + d[0], c0[1] + d[1], c0[2] + d[2]];
+        // A local coordinate of −1 or BLOCK is in the neighbouring block.
+        let ob = near_bit([c[0] >> BLOCK_SHIFT, c[1] >> BLOCK_SHIFT, c[2] >> BLOCK_SHIFT]);
+        if let Some(fb) = around[ob as usize] {
+            let s = fb.slot(local_index(c));
+            if s != NONE {
+                return s;
+            }
+        }
+    }
+    NONE
 }
 
 /// Squared distance from `p` to the farthest corner of fine voxel `k` (size `h`): every point
@@ -479,6 +560,36 @@ mod tests {
         // Centroid (0.002 + 0.0001) / 2 = 0.00105: 0.01105 away.
         assert_eq!(cov.counts(), &[0]);
         assert_eq!(cov.retired(), 0);
+    }
+
+    #[test]
+    fn a_target_retires_by_any_occupied_neighbour_within_tau_min_not_only_its_nearest() {
+        // h = 0.005, τ_min = 0.01. The target sits at the centre of voxel k: the face neighbour
+        // k ± x lies entirely within 0.0083 of it (qualifies), the edge neighbour k ± x + y
+        // reaches 0.0109 (does not). A fused point in the edge neighbour is the nearest
+        // (0.0037); one in the face neighbour (0.0074) still retires the target. Voxels at the
+        // low and high end of a block (x = 0 and 7), so the face neighbour is in the next block.
+        let h = 0.005;
+        let domain = Domain::covering(h, [-0.2; 3], [0.2; 3], 0.05);
+        for (kx, sx) in [(7, 1.0), (0, -1.0), (3, 1.0), (-9, -1.0)] {
+            let c = |k: [f64; 3]| [(k[0] + 0.5) * h, (k[1] + 0.5) * h, (k[2] + 0.5) * h];
+            let p = c([kx as f64, 3.0, 3.0]);
+            let face = [p[0] + sx * 0.0049, p[1], p[2]];
+            let edge = [p[0] + sx * 0.0026, p[1] + 0.0026, p[2]];
+            assert_eq!(domain.key(face)[0], kx + sx as i32);
+            assert_eq!(domain.key(edge), [kx + sx as i32, 4, 3]);
+            let mut cov = Coverage::new(domain.clone(), &[p], &[0.01, 0.02]).unwrap();
+            let mut fused = FusedCloud::new(domain.clone());
+            let d = fused.insert(&[face, edge]);
+            cov.update(&fused, &ChangedBlocks::new(&fused, &d.changed));
+            assert_eq!((cov.counts(), cov.retired()), (&[1usize, 1][..], 1), "voxel x {kx}, side {sx}");
+            // The edge point alone: covered, not for good.
+            let mut cov = Coverage::new(domain.clone(), &[p], &[0.01, 0.02]).unwrap();
+            let mut fused = FusedCloud::new(domain.clone());
+            let d = fused.insert(&[edge]);
+            cov.update(&fused, &ChangedBlocks::new(&fused, &d.changed));
+            assert_eq!((cov.counts(), cov.retired()), (&[1usize, 1][..], 0), "voxel x {kx}, side {sx}");
+        }
     }
 
     #[test]

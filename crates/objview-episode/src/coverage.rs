@@ -25,6 +25,12 @@
 //! voxel, or a neighbour where the view left its own voxel empty (pixels are ~1.4 voxels wide
 //! at the SPEC's distance) — gives the witness slot.
 //!
+//! A live target with nothing fused within τ_max (most of the live targets an update looks
+//! at: the unseen side of a wall, the far half of a block next to a new patch) can change only
+//! through a changed slot within τ_max of it: the targets of an octant of their block that no
+//! changed group's box comes within τ_max of (tight boxes, so the test is a lower bound of every
+//! computed distance) are passed by.
+//!
 //! The searching targets of a block scan the changed groups together, group by group, in the
 //! order and with the running bounds a per-target walk would use (same answers), so that each
 //! group's box is tested against all of them while it is at hand.
@@ -63,6 +69,18 @@ struct Index {
     /// larger τ_min the farther ones still retire a target, after its search
     /// ([`Coverage::permanent`]).
     near: Vec<u32>,
+    /// Per target block: the box of its points in each octant ([`octant_of`]; empty where it
+    /// has none). A target with no fused point within τ_max in an octant that no changed group
+    /// comes within τ_max of cannot change, so an update passes it by.
+    octants: Vec<[Aabb; 8]>,
+}
+
+/// The octant (0..8, bit per axis: the upper half of the block) of the fine voxel with local
+/// index `li` in its block.
+#[inline]
+fn octant_of(li: usize) -> usize {
+    let (b, half) = (BLOCK as usize, BLOCK as usize / 2);
+    (li % b / half) | (li / b % b / half) << 1 | (li / (b * b) / half) << 2
 }
 
 /// The bit of the fine voxel at offset `d` (each −1, 0 or 1 per axis) in [`Index::near`].
@@ -156,6 +174,16 @@ impl Coverage {
                 local_index(k) as u16 | flag
             })
             .collect();
+        let octants = blocks
+            .iter()
+            .map(|&(_, i, j)| {
+                let mut boxes = [Aabb::EMPTY; 8];
+                for t in i as usize..j as usize {
+                    boxes[octant_of(local_index(domain.key(pts[t])))].grow(pts[t]);
+                }
+                boxes
+            })
+            .collect();
         let near = pts
             .iter()
             .map(|&p| {
@@ -176,7 +204,7 @@ impl Coverage {
             .collect();
         Ok(Coverage {
             live_blocks: (0..blocks.len() as u32).collect(),
-            ix: Arc::new(Index { domain, pts, blocks, own, near }),
+            ix: Arc::new(Index { domain, pts, blocks, own, near, octants }),
             counts: vec![0; t2.len()],
             t2,
             r2,
@@ -316,11 +344,31 @@ impl Coverage {
         // is beyond every one of them.
         let mut tbox = Aabb::EMPTY;
         let mut reach: f64 = 0.0;
+        // Per octant of the block, whether some changed group comes within τ_max of its
+        // targets' box (0 no, 1 yes, 2 not asked yet).
+        let mut reached = [2u8; 8];
+        let octant_boxes = &self.ix.octants[tb as usize];
         for &i in &self.live[tb as usize] {
             let iu = i as usize;
-            let p = self.ix.pts[iu];
             let (old, old_nn) = (self.d2[iu], self.nn[iu]);
-            let s = witness(&around, (self.ix.own[iu] & !OWN_RETIRES) as usize, self.ix.near[iu]);
+            let li = (self.ix.own[iu] & !OWN_RETIRES) as usize;
+            if old_nn == NONE {
+                // Nothing fused within τ_max of the target (a live target without a slot): only
+                // a changed slot within τ_max can change that — or give it a witness, which lies
+                // closer still. None in a group that stays τ_max away from its octant's box.
+                let o = octant_of(li);
+                if reached[o] == 2 {
+                    let ob = &octant_boxes[o];
+                    reached[o] =
+                        sc.cand.iter().any(|&(_, gi)| box_box_dist2(&groups.blocks[gi].aabb, ob) < self.r2)
+                            as u8;
+                }
+                if reached[o] == 0 {
+                    continue;
+                }
+            }
+            let p = self.ix.pts[iu];
+            let s = witness(&around, li, self.ix.near[iu]);
             if s != NONE {
                 let d2 = dist2(p, fused.pos[s as usize]);
                 out.push(Change { target: i, d2, nn: s, retire: true });

@@ -337,6 +337,8 @@ impl Coverage {
                 .block_index([key[0] + o[0], key[1] + o[1], key[2] + o[2]])
                 .and_then(|bi| fused.block_at(bi))
         });
+        // Their occupancy as rows along x, made when the first target needs it.
+        let mut rows: Option<NeighbourRows> = None;
         sc.who.clear();
         sc.best.clear();
         sc.xyz.iter_mut().for_each(Vec::clear);
@@ -368,10 +370,9 @@ impl Coverage {
                 }
             }
             let p = self.ix.pts[iu];
-            let s = witness(&around, li, self.ix.near[iu]);
-            if s != NONE {
-                let d2 = dist2(p, fused.pos[s as usize]);
-                out.push(Change { target: i, d2, nn: s, retire: true });
+            let rows = rows.get_or_insert_with(|| NeighbourRows::new(&around));
+            if let Some((s, q)) = rows.witness(&around, li, self.ix.near[iu]) {
+                out.push(Change { target: i, d2: dist2(p, q), nn: s, retire: true });
                 continue;
             }
             let moved = old_nn != NONE && fused.stamp[old_nn as usize] == epoch;
@@ -482,38 +483,69 @@ fn near_offset(b: u32) -> [i32; 3] {
     [(b % 3) as i32 - 1, (b / 3 % 3) as i32 - 1, (b / 9) as i32 - 1]
 }
 
-/// The slot of an occupied voxel among the neighbours `mask` ([`Index::near`]) of the fine
-/// voxel with local index `li` in the middle block of `around` (the fused blocks of the
-/// 3×3×3 block neighbourhood, by [`near_bit`] of the block offset), or NONE: the own voxel
-/// first, then by ascending bit, so the witness does not depend on anything but the cloud.
-#[inline]
-fn witness(around: &[Option<&FusedBlock>; 27], li: usize, mask: u32) -> u32 {
-    let m = BLOCK - 1;
-    let c0 = [li as i32 & m, li as i32 >> BLOCK_SHIFT & m, li as i32 >> (2 * BLOCK_SHIFT)];
-    let own = 1u32 << NEAR_OWN;
-    if mask & own != 0 {
-        if let Some(fb) = around[NEAR_OWN as usize] {
-            let s = fb.slot(li);
-            if s != NONE {
-                return s;
+/// The fine-voxel occupancy of a target block and the layer of voxels around it, as rows
+/// along x: `rows[z + 1][y + 1]` holds bit `x + 1` for local coordinates −1..=[`BLOCK`] (a
+/// coordinate of −1 or `BLOCK` is in the neighbouring block), so that the occupancy of the 27
+/// voxels around any voxel of the block is nine shifts and masks.
+struct NeighbourRows {
+    rows: [[u16; ROWS]; ROWS],
+}
+
+/// Rows (and bits per row) of [`NeighbourRows`]: the block's voxels and one on each side.
+const ROWS: usize = BLOCK as usize + 2;
+
+impl NeighbourRows {
+    /// The occupancy around the middle block of `around` (the fused blocks of the 3×3×3
+    /// block neighbourhood, by [`near_bit`] of the block offset).
+    fn new(around: &[Option<&FusedBlock>; 27]) -> NeighbourRows {
+        let n = BLOCK as usize;
+        let mut rows = [[0u16; ROWS]; ROWS];
+        for (zi, plane) in rows.iter_mut().enumerate() {
+            for (yi, row) in plane.iter_mut().enumerate() {
+                // Block offset and local coordinate of row y = yi − 1, z = zi − 1.
+                let (oy, ly) = (yi.div_ceil(n), (yi + n - 1) % n);
+                let (oz, lz) = (zi.div_ceil(n), (zi + n - 1) % n);
+                let at = |ox: usize| {
+                    around[ox + 3 * (oy + 3 * oz)].map_or(0u16, |fb| fb.row_occupancy(ly, lz) as u16)
+                };
+                // x = −1 is the lower block's last voxel, x = BLOCK the upper block's first.
+                *row = (at(0) >> (n - 1)) | at(1) << 1 | (at(2) & 1) << (n + 1);
             }
         }
+        NeighbourRows { rows }
     }
-    let mut rest = mask & !own;
-    while rest != 0 {
-        let d = near_offset(rest.trailing_zeros());
-        rest &= rest - 1;
-        let c = [c0[0] + d[0], c0[1] + d[1], c0[2] + d[2]];
-        // A local coordinate of −1 or BLOCK is in the neighbouring block.
+
+    /// The slot and position of an occupied voxel among the neighbours `mask` ([`Index::near`])
+    /// of the fine voxel with local index `li`, or `None`: the own voxel first, then by
+    /// ascending bit, so the witness depends on nothing but the cloud.
+    #[inline]
+    fn witness(&self, around: &[Option<&FusedBlock>; 27], li: usize, mask: u32) -> Option<(u32, [f64; 3])> {
+        if mask == 0 {
+            return None;
+        }
+        let m = BLOCK as usize - 1;
+        let s = BLOCK_SHIFT as usize;
+        let (x, y, z) = (li & m, li >> s & m, li >> (2 * s));
+        // Bit near_bit(d) of `occupied` for the voxel at offset d: rows y − 1..=y + 1 and
+        // z − 1..=z + 1 are rows[z..=z + 2][y..=y + 2], voxels x − 1..=x + 1 their bits x..=x + 2.
+        let mut occupied = 0u32;
+        for dz in 0..3 {
+            for dy in 0..3 {
+                occupied |= ((self.rows[z + dz][y + dy] >> x) as u32 & 7) << (3 * (dy + 3 * dz));
+            }
+        }
+        let hit = occupied & mask;
+        if hit == 0 {
+            return None;
+        }
+        let b = if hit >> NEAR_OWN & 1 == 1 { NEAR_OWN } else { hit.trailing_zeros() };
+        let d = near_offset(b);
+        let c = [x as i32 + d[0], y as i32 + d[1], z as i32 + d[2]];
         let ob = near_bit([c[0] >> BLOCK_SHIFT, c[1] >> BLOCK_SHIFT, c[2] >> BLOCK_SHIFT]);
-        if let Some(fb) = around[ob as usize] {
-            let s = fb.slot(local_index(c));
-            if s != NONE {
-                return s;
-            }
-        }
+        let w = around[ob as usize].and_then(|fb| fb.slot_and_position(local_index(c)));
+        debug_assert!(w.is_some(), "an occupied neighbour has a slot");
+        w
     }
-    NONE
 }
 
 /// Squared distance from `p` to the farthest corner of fine voxel `k` (size `h`): every point
@@ -613,30 +645,41 @@ mod tests {
     #[test]
     fn a_target_retires_by_any_occupied_neighbour_within_tau_min_not_only_its_nearest() {
         // h = 0.005, τ_min = 0.01. The target sits at the centre of voxel k: the face neighbour
-        // k ± x lies entirely within 0.0083 of it (qualifies), the edge neighbour k ± x + y
-        // reaches 0.0109 (does not). A fused point in the edge neighbour is the nearest
-        // (0.0037); one in the face neighbour (0.0074) still retires the target. Voxels at the
-        // low and high end of a block (x = 0 and 7), so the face neighbour is in the next block.
+        // k ± e_a lies entirely within 0.0083 of it (qualifies), the edge neighbour
+        // k ± e_a + e_b reaches 0.0109 (does not). A fused point in the edge neighbour is the
+        // nearest (0.0037); one in the face neighbour (0.0074) still retires the target. Along
+        // each axis a, voxels at the low and high end of a block (0 and 7, −9 ≡ 7), so the face
+        // neighbour is in the next block, and one inside (3).
         let h = 0.005;
         let domain = Domain::covering(h, [-0.2; 3], [0.2; 3], 0.05);
-        for (kx, sx) in [(7, 1.0), (0, -1.0), (3, 1.0), (-9, -1.0)] {
-            let c = |k: [f64; 3]| [(k[0] + 0.5) * h, (k[1] + 0.5) * h, (k[2] + 0.5) * h];
-            let p = c([kx as f64, 3.0, 3.0]);
-            let face = [p[0] + sx * 0.0049, p[1], p[2]];
-            let edge = [p[0] + sx * 0.0026, p[1] + 0.0026, p[2]];
-            assert_eq!(domain.key(face)[0], kx + sx as i32);
-            assert_eq!(domain.key(edge), [kx + sx as i32, 4, 3]);
-            let mut cov = Coverage::new(domain.clone(), &[p], &[0.01, 0.02]).unwrap();
-            let mut fused = FusedCloud::new(domain.clone());
-            let d = fused.insert(&[face, edge]);
-            cov.update(&fused, &ChangedBlocks::new(&fused, &d.changed));
-            assert_eq!((cov.counts(), cov.retired()), (&[1usize, 1][..], 1), "voxel x {kx}, side {sx}");
-            // The edge point alone: covered, not for good.
-            let mut cov = Coverage::new(domain.clone(), &[p], &[0.01, 0.02]).unwrap();
-            let mut fused = FusedCloud::new(domain.clone());
-            let d = fused.insert(&[edge]);
-            cov.update(&fused, &ChangedBlocks::new(&fused, &d.changed));
-            assert_eq!((cov.counts(), cov.retired()), (&[1usize, 1][..], 0), "voxel x {kx}, side {sx}");
+        for a in 0..3 {
+            let b = (a + 1) % 3;
+            for (ka, sa) in [(7, 1), (0, -1), (3, 1), (-9, -1)] {
+                let mut k = [3; 3];
+                k[a] = ka;
+                let p: [f64; 3] = std::array::from_fn(|i| (k[i] as f64 + 0.5) * h);
+                let mut face = p;
+                face[a] += sa as f64 * 0.0049;
+                let mut edge = p;
+                edge[a] += sa as f64 * 0.0026;
+                edge[b] += 0.0026;
+                let (mut kf, mut ke) = (k, k);
+                kf[a] += sa;
+                ke[a] += sa;
+                ke[b] += 1;
+                assert_eq!((domain.key(face), domain.key(edge)), (kf, ke));
+                let retired_with = |points: &[[f64; 3]]| {
+                    let mut cov = Coverage::new(domain.clone(), &[p], &[0.01, 0.02]).unwrap();
+                    let mut fused = FusedCloud::new(domain.clone());
+                    let d = fused.insert(points);
+                    cov.update(&fused, &ChangedBlocks::new(&fused, &d.changed));
+                    assert_eq!(cov.counts(), &[1, 1], "axis {a}, voxel {k:?}");
+                    cov.retired()
+                };
+                assert_eq!(retired_with(&[face, edge]), 1, "axis {a}, voxel {k:?}");
+                // The edge point alone: covered, not for good.
+                assert_eq!(retired_with(&[edge]), 0, "axis {a}, voxel {k:?}");
+            }
         }
     }
 

@@ -17,6 +17,10 @@ use crate::grid::{
     SuperHandle, BLOCK_CELLS, NONE,
 };
 
+/// Fine voxels per block row (x), as `usize`; a row is one byte of the occupancy words.
+const BLOCK_CELLS_ROW: usize = crate::grid::BLOCK as usize;
+const _: () = assert!(BLOCK_CELLS_ROW == 8);
+
 /// The set bits of `word` below bit `b` (< 64): a voxel's place among the occupied voxels of
 /// its occupancy word.
 #[inline(always)]
@@ -92,6 +96,25 @@ impl FusedBlock {
             self.slots[self.rank(li)]
         } else {
             NONE
+        }
+    }
+
+    /// The occupancy of the x-row of fine voxels at local `y`, `z` (bit = local x).
+    #[inline]
+    pub fn row_occupancy(&self, y: usize, z: usize) -> u8 {
+        let li = BLOCK_CELLS_ROW * (y + BLOCK_CELLS_ROW * z);
+        (self.occupied[li >> 6] >> (li & 63)) as u8
+    }
+
+    /// The slot of fine voxel `li` (local index) and its position, read from the block's own
+    /// copy (no cache miss into [`FusedCloud::pos`]), or `None` when the voxel is empty.
+    #[inline]
+    pub fn slot_and_position(&self, li: usize) -> Option<(u32, [f64; 3])> {
+        if self.is_occupied(li) {
+            let j = self.rank(li);
+            Some((self.slots[j], self.centroids[j]))
+        } else {
+            None
         }
     }
 

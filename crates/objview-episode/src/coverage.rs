@@ -268,7 +268,14 @@ impl Coverage {
             .with_min_len(16)
             .map_init(Scratch::default, |sc, &tb| this.block_changes(fused, groups, tb, sc))
             .collect();
-        let mut any_retired = false;
+        // The target blocks where a target retired (their live lists shrink below).
+        let retired_in: Vec<u32> = self
+            .live_blocks
+            .iter()
+            .zip(&changes)
+            .filter(|(_, c)| c.iter().any(|c| c.retire))
+            .map(|(&tb, _)| tb)
+            .collect();
         for c in changes.iter().flatten() {
             let i = c.target as usize;
             let old = self.d2[i];
@@ -287,12 +294,11 @@ impl Coverage {
                 // Marked by NONE in `nn`: the distance is frozen below τ_min².
                 self.nn[i] = NONE;
                 self.retired += 1;
-                any_retired = true;
             }
         }
-        if any_retired {
+        if !retired_in.is_empty() {
             let (nn, d2) = (&self.nn, &self.d2);
-            for &tb in &self.live_blocks {
+            for &tb in &retired_in {
                 self.live[tb as usize].retain(|&i| !(nn[i as usize] == NONE && d2[i as usize].is_finite()));
             }
             let live = &self.live;

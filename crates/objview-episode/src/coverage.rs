@@ -262,21 +262,28 @@ impl Coverage {
             return;
         }
         let this = &*self;
-        let changes: Vec<Vec<Change>> = self
+        // Per run of target blocks (one per rayon split, not one per block): the changes of
+        // their targets and the blocks where a target retired (their live lists shrink below).
+        // Each target changes at most once, so the order of the changes does not matter.
+        let changes: Vec<(Vec<Change>, Vec<u32>)> = self
             .live_blocks
             .par_iter()
             .with_min_len(16)
-            .map_init(Scratch::default, |sc, &tb| this.block_changes(fused, groups, tb, sc))
+            .fold(
+                || (Scratch::default(), Vec::new(), Vec::new()),
+                |(mut sc, mut out, mut retired_in), &tb| {
+                    let from = out.len();
+                    this.block_changes(fused, groups, tb, &mut sc, &mut out);
+                    if out[from..].iter().any(|c| c.retire) {
+                        retired_in.push(tb);
+                    }
+                    (sc, out, retired_in)
+                },
+            )
+            .map(|(_, out, retired_in)| (out, retired_in))
             .collect();
-        // The target blocks where a target retired (their live lists shrink below).
-        let retired_in: Vec<u32> = self
-            .live_blocks
-            .iter()
-            .zip(&changes)
-            .filter(|(_, c)| c.iter().any(|c| c.retire))
-            .map(|(&tb, _)| tb)
-            .collect();
-        for c in changes.iter().flatten() {
+        let retired_in: Vec<u32> = changes.iter().flat_map(|(_, r)| r.iter().copied()).collect();
+        for c in changes.iter().flat_map(|(c, _)| c) {
             let i = c.target as usize;
             let old = self.d2[i];
             if old != c.d2 {
@@ -306,7 +313,7 @@ impl Coverage {
         }
     }
 
-    /// The changes of the live targets of target block `tb` (see the module docs), using the
+    /// Appends to `out` the changes of the live targets of target block `tb` (see the module docs), using the
     /// worker's buffers `sc`.
     ///
     /// Three passes: each target is settled at once where it can be (own voxel occupied:
@@ -322,15 +329,15 @@ impl Coverage {
         groups: &ChangedBlocks,
         tb: u32,
         sc: &mut Scratch,
-    ) -> Vec<Change> {
+        out: &mut Vec<Change>,
+    ) {
         let domain = &self.ix.domain;
         let (key, _, _) = self.ix.blocks[tb as usize];
         sc.cand.clear();
         groups.candidates(domain, key, self.r2, &mut sc.cand);
-        let mut out = Vec::new();
         if sc.cand.is_empty() {
             // No changed slot within τ_max of this block: nothing in it can change.
-            return out;
+            return;
         }
         sc.cand.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         let epoch = fused.epoch();
@@ -471,7 +478,6 @@ impl Coverage {
                 out.push(Change { target: i, d2, nn, retire });
             }
         }
-        out
     }
 
     /// Whether the voxel of `p`'s nearest slot `nn` lies entirely within τ_min of `p`. (The

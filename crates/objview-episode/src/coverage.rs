@@ -57,9 +57,8 @@ struct Index {
     pts: Vec<[f64; 3]>,
     /// Per target block: its block key and the range of its points.
     blocks: Vec<([i32; 3], u32, u32)>,
-    /// Per point: the local index of its own fine voxel, with [`OWN_RETIRES`] set when that
-    /// voxel lies entirely within τ_min of it (less the margin), so that an update need not
-    /// compute the point's key again (three divisions and floors per live target and step).
+    /// Per point: the local index of its own fine voxel, so that an update need not compute
+    /// the point's key again (three divisions and floors per live target and step).
     own: Vec<u16>,
     /// Per point: which of the 27 fine voxels around its own (bit [`near_bit`]) lie entirely
     /// within τ_min of it (less the margin). Any of them occupied covers the point at every τ
@@ -92,9 +91,7 @@ fn near_bit(d: [i32; 3]) -> u32 {
 /// The own voxel's bit in [`Index::near`].
 const NEAR_OWN: u32 = 13;
 
-/// The flag of [`Index::own`]: the point's own voxel, once occupied, retires it.
-const OWN_RETIRES: u16 = 1 << 15;
-const _: () = assert!(crate::grid::BLOCK_CELLS <= OWN_RETIRES as usize);
+const _: () = assert!(crate::grid::BLOCK_CELLS <= u16::MAX as usize + 1);
 
 /// Per-worker buffers of [`Coverage::block_changes`], kept across target blocks.
 #[derive(Default)]
@@ -166,28 +163,24 @@ impl Coverage {
         let r2 = t2.iter().cloned().fold(0.0, f64::max);
         let tmin2 = t2.iter().cloned().fold(f64::INFINITY, f64::min);
         let retire2 = tmin2 - RETIRE_MARGIN2;
-        let own = pts
-            .iter()
-            .map(|&p| {
-                let k = domain.key(p);
-                let flag = if max_corner_d2(domain.h, k, p) < retire2 { OWN_RETIRES } else { 0 };
-                local_index(k) as u16 | flag
-            })
-            .collect();
+        // Each point's key once: its own voxel, its octant and its neighbourhood's mask.
+        let mut keys = Vec::new();
+        domain.keys_into(&pts, &mut keys);
+        let own: Vec<u16> = keys.iter().map(|&k| local_index(k) as u16).collect();
         let octants = blocks
             .iter()
             .map(|&(_, i, j)| {
                 let mut boxes = [Aabb::EMPTY; 8];
                 for t in i as usize..j as usize {
-                    boxes[octant_of(local_index(domain.key(pts[t])))].grow(pts[t]);
+                    boxes[octant_of(own[t] as usize)].grow(pts[t]);
                 }
                 boxes
             })
             .collect();
         let near = pts
             .iter()
-            .map(|&p| {
-                let k = domain.key(p);
+            .zip(&keys)
+            .map(|(&p, &k)| {
                 let mut m = 0u32;
                 for dz in -1..=1 {
                     for dy in -1..=1 {
@@ -313,11 +306,13 @@ impl Coverage {
         }
     }
 
-    /// Appends to `out` the changes of the live targets of target block `tb` (see the module docs), using the
-    /// worker's buffers `sc`.
+    /// Appends to `out` the changes of the live targets of target block `tb` (see the module
+    /// docs), using the worker's buffers `sc`.
     ///
-    /// Three passes: each target is settled at once where it can be (own voxel occupied:
-    /// retired; covered by an unmoved witness: nothing to do) or gets its starting bound; then
+    /// Three passes: each target is settled at once where it can be (nothing fused near it in
+    /// an octant no change reaches: passed by; a qualifying voxel of its neighbourhood
+    /// occupied: retired; covered by an unmoved witness: nothing to do) or gets its starting
+    /// bound; then
     /// the changed groups are scanned group by group for all the searching targets together
     /// (each group's box tested against every target's bound while it is in registers,
     /// instead of every target walking the group list); then each target's answer is decided.
@@ -366,7 +361,7 @@ impl Coverage {
         for &i in &self.live[tb as usize] {
             let iu = i as usize;
             let (old, old_nn) = (self.d2[iu], self.nn[iu]);
-            let li = (self.ix.own[iu] & !OWN_RETIRES) as usize;
+            let li = self.ix.own[iu] as usize;
             if old_nn == NONE {
                 // Nothing fused within τ_max of the target (a live target without a slot): only
                 // a changed slot within τ_max can change that — or give it a witness, which lies

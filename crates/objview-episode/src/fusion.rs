@@ -17,9 +17,8 @@ use crate::grid::{
     SuperHandle, BLOCK_CELLS, NONE,
 };
 
-/// Fine voxels per block row (x), as `usize`; a row is one byte of the occupancy words.
-const BLOCK_CELLS_ROW: usize = crate::grid::BLOCK as usize;
-const _: () = assert!(BLOCK_CELLS_ROW == 8);
+// A block row (x) is one byte of the occupancy words (`FusedBlock::row_occupancy`).
+const _: () = assert!(crate::grid::BLOCK == 8);
 
 /// The set bits of `word` below bit `b` (< 64): a voxel's place among the occupied voxels of
 /// its occupancy word.
@@ -102,7 +101,8 @@ impl FusedBlock {
     /// The occupancy of the x-row of fine voxels at local `y`, `z` (bit = local x).
     #[inline]
     pub fn row_occupancy(&self, y: usize, z: usize) -> u8 {
-        let li = BLOCK_CELLS_ROW * (y + BLOCK_CELLS_ROW * z);
+        let n = crate::grid::BLOCK as usize;
+        let li = n * (y + n * z);
         (self.occupied[li >> 6] >> (li & 63)) as u8
     }
 

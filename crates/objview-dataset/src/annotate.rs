@@ -23,10 +23,7 @@ use objview_geom::cloud::{cloud_count, read_cloud, sample_surface};
 use objview_geom::normalize::{load_normalized, Normalization, Transform};
 use objview_render::{Camera, Intrinsics};
 use objview_views::ViewSet;
-use objview_voxel::{
-    bitset_count, union_bitsets, union_into, Visibility, VisibilityMode, VoxelSet, DEFAULT_MAX_RANGE,
-};
-use rayon::prelude::*;
+use objview_voxel::{bitset_count, union_bitsets, Visibility, VisibilityMode, VoxelSet, DEFAULT_MAX_RANGE};
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
@@ -355,7 +352,6 @@ pub fn annotate_object(
 
     let t = Instant::now();
     let vis = Visibility::with_max_range(&set, &mesh, settings.visibility, settings.max_range);
-    let words = set.len().div_ceil(64);
     let mut counts = Vec::with_capacity(views.sets.len());
     let mut planning_bits = Vec::new();
     for (n, cams) in &views.sets {
@@ -363,22 +359,9 @@ pub fn annotate_object(
             planning_bits = vis.observe_all_bitsets(cams);
             counts.push(bitset_count(&union_bitsets(&planning_bits, set.len())));
         } else {
-            let acc = cams
-                .par_iter()
-                .fold(
-                    || vec![0u64; words],
-                    |mut acc, c| {
-                        union_into(&mut acc, &vis.observe_bitset(c));
-                        acc
-                    },
-                )
-                .reduce(
-                    || vec![0u64; words],
-                    |mut a, b| {
-                        union_into(&mut a, &b);
-                        a
-                    },
-                );
+            // Only the union is needed here: it skips the rays that can only re-find voxels the
+            // union already holds (same bits).
+            let acc = vis.union_all(cams);
             counts.push(bitset_count(&acc));
         }
     }

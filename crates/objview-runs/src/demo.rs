@@ -386,7 +386,7 @@ fn one_object(path: &Path, renders: &Path, cameras: &[Camera]) -> Result<Row, Ru
     let vis = Visibility::new(&set, &mesh, VisibilityMode::Inverse);
     let mut acc = vec![0u64; set.len().div_ceil(64)];
     for cam in cameras {
-        objview_voxel::union_into(&mut acc, &vis.observe_bitset(cam));
+        vis.observe_union_into(cam, &mut acc);
     }
     let start = Camera::new(start_pose(VIEW_RADIUS), Intrinsics::default());
     let frame = objview_render::render(&mesh, &start);

@@ -9,6 +9,7 @@ use super::axis::fmin;
 use super::bitset::bitset_to_indices;
 use super::field::distance_field;
 use super::project::{pixel_of, CELL, TILE};
+use super::prune::open_faces;
 use super::walk::{Cast, Octant, Ray};
 use super::{pixel_ray_direction, DEFAULT_MAX_RANGE};
 use crate::key::center_of;
@@ -26,6 +27,9 @@ pub struct InverseCaster<'a> {
     pub(super) dims: [usize; 3],
     pub(super) strides: [usize; 3],
     pub(super) max_range: f64,
+    /// Per voxel, its open faces ([`super::prune::open_faces`]), for
+    /// [`InverseCaster::observe_union_into`].
+    pub(super) open: Vec<u8>,
 }
 
 impl<'a> InverseCaster<'a> {
@@ -39,7 +43,7 @@ impl<'a> InverseCaster<'a> {
     pub fn with_max_range(set: &'a VoxelSet, max_range: f64) -> InverseCaster<'a> {
         let dims = set.grid_dims();
         let strides = [dims[1] * dims[2], dims[2], 1];
-        InverseCaster { set, field: distance_field(set), dims, strides, max_range }
+        InverseCaster { set, field: distance_field(set), dims, strides, max_range, open: open_faces(set) }
     }
 
     /// The set this caster walks.
@@ -95,7 +99,34 @@ impl<'a> InverseCaster<'a> {
             // SAFETY: the CPU has the features `observe_avx2` is compiled for.
             return unsafe { self.observe_avx2(camera, bits) };
         }
-        self.observe_body(camera, bits)
+        self.observe_body::<false>(camera, bits)
+    }
+
+    /// ORs O(v) for `camera` into the union `acc` (a bitset over set indices, at least
+    /// `len.div_ceil(64)` words): afterwards `acc` is `acc ∪ O(v)`, as after
+    /// [`InverseCaster::observe_into`] with `bits = acc`, with less work when `acc` already
+    /// holds much of the set.
+    ///
+    /// Exact: a ray through a pixel centre that enters a voxel's box passes within the voxel's
+    /// conservative projected footprint (the one of the depth bound), so a pixel outside the
+    /// footprints of every voxel not yet in `acc` can only see voxels of `acc`; such pixels are
+    /// not cast. The others are cast exactly as by `observe_into`. Where some footprint is
+    /// unbounded (a voxel box reaching the camera plane) every pixel is cast.
+    pub fn observe_union_into(&self, camera: &Camera, acc: &mut [u64]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("popcnt") {
+            // SAFETY: the CPU has the features `union_avx2` is compiled for.
+            return unsafe { self.union_avx2(camera, acc) };
+        }
+        self.observe_body::<true>(camera, acc)
+    }
+
+    /// [`InverseCaster::observe_union_into`] compiled for AVX2 and POPCNT, as
+    /// [`InverseCaster::observe_avx2`].
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,popcnt")]
+    fn union_avx2(&self, camera: &Camera, acc: &mut [u64]) {
+        self.observe_body::<true>(camera, acc)
     }
 
     /// [`InverseCaster::observe_into`] compiled for AVX2 and POPCNT (selected at run time):
@@ -105,12 +136,13 @@ impl<'a> InverseCaster<'a> {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,popcnt")]
     fn observe_avx2(&self, camera: &Camera, bits: &mut [u64]) {
-        self.observe_body(camera, bits)
+        self.observe_body::<false>(camera, bits)
     }
 
-    /// The body of [`InverseCaster::observe_into`].
+    /// The body of [`InverseCaster::observe_into`] and (`UNION`) of
+    /// [`InverseCaster::observe_union_into`], where `bits` is the union.
     #[inline(always)]
-    fn observe_body(&self, camera: &Camera, bits: &mut [u64]) {
+    fn observe_body<const UNION: bool>(&self, camera: &Camera, bits: &mut [u64]) {
         let set = self.set;
         if set.is_empty() {
             return;
@@ -123,7 +155,19 @@ impl<'a> InverseCaster<'a> {
         let mut cell_min = vec![f64::INFINITY; cw * ch];
         // Bit (v % 8)·8 + u % 8 of word (v / 8)·tw + u / 8: pixel (u, v) is some voxel's pixel.
         let mut mask = vec![0u64; tw * th];
+        // In a union, only the pixels whose rays may see a voxel not yet in it.
+        let mut need = Vec::new();
+        let prune = UNION && {
+            need = vec![0u64; tw * th];
+            self.needed_pixels(camera, bits, &mut need)
+        };
+        if prune && need.iter().all(|&n| n == 0) {
+            return;
+        }
         let global_min = self.project_voxels(camera, &mut cell_min, &mut mask);
+        if prune {
+            mask.iter_mut().zip(&need).for_each(|(m, n)| *m &= n);
+        }
         let qu: Vec<f64> = (0..k.width).map(|u| k.pixel_ray(u, 0)[0]).collect();
         let qv: Vec<f64> = (0..k.height).map(|v| k.pixel_ray(0, v)[1]).collect();
         let (cr, cd, cf) = (camera.right, camera.down, camera.forward);

@@ -61,16 +61,25 @@
 //! and the batched ray set-ups; ≈1.5 ms per view on an idle Sapphire Rapids core (was ≈2.05 ms
 //! at ≈18.0 M instructions before the batching, which trades a few instructions for overlap).
 //!
+//! Unions: where only |∪ O(v)| over a view set is needed (the annotation's saturation curve,
+//! for every grid size but the planning set's 128), [`InverseCaster::observe_union_into`] casts
+//! only the pixels whose rays may still see a voxel the union does not hold: the footprints of
+//! the voxels not yet in it that have an exterior face neighbour on a face turned to the camera
+//! (`prune`). The same union, bit for bit; on the mug's 3,032-view sweep 4.64 → 2.25 s on one
+//! core (Intel Xeon VM, 2026-12-05), because once a set's union holds the visible surface
+//! almost no voxel is live (tammes-492: 12.4M rays → 0.13M).
+//!
 //! Layout: the modes, [`Visibility`] and the one-call functions are here; `caster` holds
 //! [`InverseCaster`] and its entry points, `project` the first pass, `walk` the ray set-up and
-//! walks, `axis` the per-axis cell arithmetic, `field` the distance field, `bitset` the bitset
-//! helpers.
+//! walks, `prune` the rays a union can skip, `axis` the per-axis cell arithmetic, `field` the
+//! distance field, `bitset` the bitset helpers.
 
 mod axis;
 mod bitset;
 mod caster;
 mod field;
 mod project;
+mod prune;
 #[cfg(test)]
 mod tests;
 mod walk;
@@ -189,9 +198,14 @@ impl<'a> Visibility<'a> {
         let caster = match mode {
             VisibilityMode::Inverse => InverseCaster::with_max_range(set, max_range),
             // Mesh mode never walks rays: skip the distance field.
-            VisibilityMode::Mesh => {
-                InverseCaster { set, field: Vec::new(), dims: set.grid_dims(), strides: [0; 3], max_range }
-            }
+            VisibilityMode::Mesh => InverseCaster {
+                set,
+                field: Vec::new(),
+                dims: set.grid_dims(),
+                strides: [0; 3],
+                max_range,
+                open: Vec::new(),
+            },
         };
         Visibility { mode, mesh, caster }
     }
@@ -225,6 +239,39 @@ impl<'a> Visibility<'a> {
     /// `cameras[i]` whatever the thread count.
     pub fn observe_all(&self, cameras: &[Camera]) -> Vec<Vec<u32>> {
         cameras.par_iter().map(|c| self.observe(c)).collect()
+    }
+
+    /// ORs O(v) for `camera` into the union `acc` (a bitset over set indices); in `inverse`
+    /// mode through [`InverseCaster::observe_union_into`], which skips the rays that can only
+    /// see voxels already in `acc`.
+    pub fn observe_union_into(&self, camera: &Camera, acc: &mut [u64]) {
+        match self.mode {
+            VisibilityMode::Inverse => self.caster.observe_union_into(camera, acc),
+            VisibilityMode::Mesh => union_into(acc, &self.observe_bitset(camera)),
+        }
+    }
+
+    /// |∪ O(v)| over `cameras` as a bitset over set indices, in parallel over views (rayon;
+    /// each thread accumulates its own union with [`Visibility::observe_union_into`]). The
+    /// same bits whatever the thread count.
+    pub fn union_all(&self, cameras: &[Camera]) -> Vec<u64> {
+        let words = self.set().len().div_ceil(64);
+        cameras
+            .par_iter()
+            .fold(
+                || vec![0u64; words],
+                |mut acc, c| {
+                    self.observe_union_into(c, &mut acc);
+                    acc
+                },
+            )
+            .reduce(
+                || vec![0u64; words],
+                |mut a, b| {
+                    union_into(&mut a, &b);
+                    a
+                },
+            )
     }
 
     /// As [`Visibility::observe_all`], as bitsets over set indices.

@@ -117,3 +117,61 @@ fn distance_field_is_exact_chebyshev() {
         }
     }
 }
+
+/// A closed 5×5×5 shell of voxels (keys 0..5 on every axis, the 3×3×3 inside empty) with one
+/// voxel in the cavity, and optionally a hole in the shell's +z face.
+fn shell_with_ball(hole: bool) -> VoxelSet {
+    let mut keys = Vec::new();
+    for x in 0..5 {
+        for y in 0..5 {
+            for z in 0..5 {
+                let on_shell = [x, y, z].iter().any(|&c| c == 0 || c == 4);
+                if on_shell && !(hole && [x, y, z] == [2, 2, 4]) {
+                    keys.push([x, y, z]);
+                }
+            }
+        }
+    }
+    keys.push([2, 2, 2]);
+    VoxelSet::from_keys(&keys, 0.1).unwrap()
+}
+
+#[test]
+fn open_faces_are_the_exterior_face_neighbours() {
+    use super::prune::open_faces;
+    // Bits: +x 0, −x 1, +y 2, −y 3, +z 4, −z 5.
+    let set = shell_with_ball(false);
+    let open = open_faces(&set);
+    let of = |k: [i32; 3]| open[set.index_of(k).unwrap()];
+    // Sealed inside: the cavity's ball and the shell's inner faces are never exterior.
+    assert_eq!(of([2, 2, 2]), 0);
+    assert_eq!(of([4, 2, 2]), 0b000001, "+x face centre: only its outer face");
+    assert_eq!(of([0, 2, 2]), 0b000010);
+    assert_eq!(of([2, 4, 2]), 0b000100);
+    assert_eq!(of([2, 2, 0]), 0b100000);
+    assert_eq!(of([4, 4, 2]), 0b000101, "edge: two outer faces");
+    assert_eq!(of([0, 0, 0]), 0b101010, "corner: three outer faces");
+    // Brute force on every voxel: a face is open exactly when its neighbour is outside the
+    // 5×5×5 block (the cavity is sealed).
+    for (i, k) in set.keys().iter().enumerate() {
+        let mut want = 0u8;
+        for a in 0..3 {
+            for (s, step) in [1, -1].into_iter().enumerate() {
+                let mut n = *k;
+                n[a] += step;
+                if n.iter().any(|&c| !(0..5).contains(&c)) {
+                    want |= 1 << (2 * a + s);
+                }
+            }
+        }
+        assert_eq!(open[i], want, "{k:?}");
+    }
+    // A hole in the +z face opens the cavity: the ball and the inner faces become exterior.
+    let set = shell_with_ball(true);
+    let open = open_faces(&set);
+    let of = |k: [i32; 3]| open[set.index_of(k).unwrap()];
+    assert_eq!(of([2, 2, 2]), 0b111111);
+    assert_eq!(of([2, 2, 0]), 0b110000, "floor centre: outer face and the cavity side");
+    assert_eq!(of([4, 2, 2]), 0b000011);
+    assert_eq!(of([2, 3, 4]), 0b111000, "next to the hole: −y (the hole), +z, −z (the cavity)");
+}

@@ -16,6 +16,10 @@ use crate::key::center_of;
 use crate::set::VoxelSet;
 use objview_render::Camera;
 
+/// In a pruned union view with at most this many needed pixels, the first pass marks only the
+/// voxel centres' pixels and the rays walk from the grid box entry (a speed setting only).
+const FEW_PIXELS: usize = 16384;
+
 /// The `inverse`-mode engine for one S_gt: the set plus its Chebyshev distance field.
 /// Build it once per object and query it for every view (it is `Sync`).
 #[derive(Debug, Clone)]
@@ -30,6 +34,8 @@ pub struct InverseCaster<'a> {
     /// Per voxel, its open faces ([`super::prune::open_faces`]), for
     /// [`InverseCaster::observe_union_into`].
     pub(super) open: Vec<u8>,
+    /// Bitset over set indices: the voxels with an open face.
+    pub(super) open_any: Vec<u64>,
 }
 
 impl<'a> InverseCaster<'a> {
@@ -43,7 +49,12 @@ impl<'a> InverseCaster<'a> {
     pub fn with_max_range(set: &'a VoxelSet, max_range: f64) -> InverseCaster<'a> {
         let dims = set.grid_dims();
         let strides = [dims[1] * dims[2], dims[2], 1];
-        InverseCaster { set, field: distance_field(set), dims, strides, max_range, open: open_faces(set) }
+        let open = open_faces(set);
+        let mut open_any = vec![0u64; set.len().div_ceil(64)];
+        for (i, _) in open.iter().enumerate().filter(|(_, &o)| o != 0) {
+            open_any[i >> 6] |= 1 << (i & 63);
+        }
+        InverseCaster { set, field: distance_field(set), dims, strides, max_range, open, open_any }
     }
 
     /// The set this caster walks.
@@ -164,7 +175,15 @@ impl<'a> InverseCaster<'a> {
         if prune && need.iter().all(|&n| n == 0) {
             return;
         }
-        let global_min = self.project_voxels(camera, &mut cell_min, &mut mask);
+        let global_min = if prune && need.iter().map(|n| n.count_ones() as usize).sum::<usize>() <= FEW_PIXELS
+        {
+            // Few pixels to cast: their centres' pixels only, and walks from the grid box
+            // entry (no depth bound, which costs a footprint per voxel).
+            self.project_centres(camera, &need, &mut mask);
+            f64::NEG_INFINITY
+        } else {
+            self.project_voxels(camera, &mut cell_min, &mut mask)
+        };
         if prune {
             mask.iter_mut().zip(&need).for_each(|(m, n)| *m &= n);
         }

@@ -197,7 +197,7 @@ impl<'a> Visibility<'a> {
     ) -> Visibility<'a> {
         let caster = match mode {
             VisibilityMode::Inverse => InverseCaster::with_max_range(set, max_range),
-            // Mesh mode never walks rays: skip the distance field.
+            // Mesh mode never walks rays: skip the distance field and the open faces.
             VisibilityMode::Mesh => InverseCaster {
                 set,
                 field: Vec::new(),
@@ -205,6 +205,7 @@ impl<'a> Visibility<'a> {
                 strides: [0; 3],
                 max_range,
                 open: Vec::new(),
+                open_any: Vec::new(),
             },
         };
         Visibility { mode, mesh, caster }
@@ -251,27 +252,31 @@ impl<'a> Visibility<'a> {
         }
     }
 
-    /// |∪ O(v)| over `cameras` as a bitset over set indices, in parallel over views (rayon;
-    /// each thread accumulates its own union with [`Visibility::observe_union_into`]). The
-    /// same bits whatever the thread count.
+    /// ∪ O(v) over `cameras` as a bitset over set indices, in parallel over views (rayon).
+    /// The threads share the union: before each view a thread takes in what the others have
+    /// found, and after it publishes what it added, so every view prunes against the most
+    /// complete union at hand ([`Visibility::observe_union_into`]). Pruning against any part
+    /// of the final union is exact, so the result is the same bits whatever the thread count
+    /// and timing.
     pub fn union_all(&self, cameras: &[Camera]) -> Vec<u64> {
+        use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
         let words = self.set().len().div_ceil(64);
-        cameras
-            .par_iter()
-            .fold(
-                || vec![0u64; words],
-                |mut acc, c| {
-                    self.observe_union_into(c, &mut acc);
-                    acc
-                },
-            )
-            .reduce(
-                || vec![0u64; words],
-                |mut a, b| {
-                    union_into(&mut a, &b);
-                    a
-                },
-            )
+        let shared: Vec<AtomicU64> = (0..words).map(|_| AtomicU64::new(0)).collect();
+        cameras.par_iter().for_each_init(
+            || vec![0u64; words],
+            |acc, c| {
+                for (a, s) in acc.iter_mut().zip(&shared) {
+                    *a |= s.load(Relaxed);
+                }
+                self.observe_union_into(c, acc);
+                for (a, s) in acc.iter().zip(&shared) {
+                    if a & !s.load(Relaxed) != 0 {
+                        s.fetch_or(*a, Relaxed);
+                    }
+                }
+            },
+        );
+        shared.into_iter().map(AtomicU64::into_inner).collect()
     }
 
     /// As [`Visibility::observe_all`], as bitsets over set indices.

@@ -30,6 +30,35 @@ pub(crate) fn pixel_of(k: &objview_render::Intrinsics, p: [f64; 3]) -> Option<(u
 }
 
 impl InverseCaster<'_> {
+    /// The mask half of [`InverseCaster::project_voxels`]: marks each voxel's pixel in `mask`
+    /// where the pixel's tile has a bit in `need` (the same arithmetic, so the same pixels).
+    #[inline(always)]
+    pub(super) fn project_centres(&self, camera: &Camera, need: &[u64], mask: &mut [u64]) {
+        let set = self.set;
+        let r = set.resolution();
+        let k = &camera.intrinsics;
+        let mtw = (k.width as usize).div_ceil(TILE);
+        let (wf, hf) = (k.width as f64, k.height as f64);
+        const CHUNK: usize = 64;
+        let mut vals = [[0.0f64; 3]; CHUNK];
+        for keys in set.keys().chunks(CHUNK) {
+            for (val, key) in vals.iter_mut().zip(keys) {
+                let pc = camera.to_camera(center_of(*key, r));
+                let z = pc[2];
+                *val = [z, k.fx * pc[0] / z + k.cx, k.fy * pc[1] / z + k.cy];
+            }
+            for &[z, uc, vc] in &vals[..keys.len()] {
+                if z > 1e-9 && uc >= 0.0 && vc >= 0.0 && uc < wf && vc < hf {
+                    let (u, v) = (uc as i64 as usize, vc as i64 as usize);
+                    let t = (v / TILE) * mtw + u / TILE;
+                    if need[t] != 0 {
+                        mask[t] |= 1u64 << ((v % TILE) * TILE + u % TILE);
+                    }
+                }
+            }
+        }
+    }
+
     /// The first pass of [`InverseCaster::observe_into`]: marks each voxel's pixel in `mask`
     /// and lowers `cell_min` (per [`CELL`]×[`CELL`]-pixel cell) over each voxel's conservative
     /// footprint to the distance below which its box cannot be entered; returns that distance's

@@ -120,25 +120,29 @@ impl InverseCaster<'_> {
         if near_grid {
             return false;
         }
-        // Live voxels, 64 per word (the bitset's words).
+        // Live voxels, 64 per word (the bitset's words): among those not in `acc` that have an
+        // open face at all.
         let keys = set.keys();
+        let limit = set.len() / LIVE_LIMIT;
         let mut live = vec![0u64; acc.len()];
         let mut count = 0usize;
-        for (c, (ks, opens)) in keys.chunks(64).zip(self.open.chunks(64)).enumerate() {
-            let mut word = 0u64;
-            for (j, (k, &open)) in ks.iter().zip(opens).enumerate() {
+        for (c, (&a, &any)) in acc.iter().zip(&self.open_any).enumerate() {
+            let mut cand = !a & any;
+            while cand != 0 {
+                let j = cand.trailing_zeros() as usize;
+                cand &= cand - 1;
+                let (k, open) = (keys[c * 64 + j], self.open[c * 64 + j]);
                 let mut facing = 0u8;
                 for a in 0..3 {
                     let ka = k[a] as f64;
                     facing |= ((ka <= cam[a]) as u8) << (2 * a) | ((ka >= cam[a]) as u8) << (2 * a + 1);
                 }
-                word |= ((open & facing != 0) as u64) << j;
+                live[c] |= ((open & facing != 0) as u64) << j;
             }
-            live[c] = word & !acc[c];
             count += live[c].count_ones() as usize;
-        }
-        if count > set.len() / LIVE_LIMIT {
-            return false;
+            if count > limit {
+                return false;
+            }
         }
         let k = &camera.intrinsics;
         let (w, h) = (k.width as usize, k.height as usize);

@@ -45,7 +45,22 @@ fn cameras(n: usize, n_random: usize, seed: u64) -> Vec<Camera> {
     }
     poses.push(Pose { center: [0.05, 0.02, 0.01], look_at: [1.0, 0.3, 0.2], roll: 0.0 });
     poses.push(Pose { center: [0.3, -0.6, 0.2], look_at: [0.0, 0.0, 0.0], roll: 0.4 });
-    poses.into_iter().map(|p| Camera::new(p, Intrinsics::default())).collect()
+    // Every fourth camera gets an image whose size is no multiple of the mask's 8-pixel tiles,
+    // an off-centre principal point and (every eighth) a mirrored x axis.
+    let odd = |i: usize| Intrinsics {
+        width: 517,
+        height: 389,
+        fx: if i % 8 == 3 { -430.0 } else { 430.0 },
+        fy: 455.0,
+        cx: 230.3,
+        cy: 201.7,
+        ..Intrinsics::default()
+    };
+    poses
+        .into_iter()
+        .enumerate()
+        .map(|(i, p)| Camera::new(p, if i % 4 == 3 { odd(i) } else { Intrinsics::default() }))
+        .collect()
 }
 
 /// Accumulates both unions view by view and compares them after each view; returns the final
@@ -153,4 +168,38 @@ fn a_voxel_entered_only_through_its_top_from_a_camera_one_cell_above_is_found() 
     }
     caster.observe_union_into(&cam, &mut acc);
     assert_eq!(acc[a >> 6] >> (a & 63) & 1, 1, "the pruned union finds A");
+}
+
+#[test]
+fn a_camera_too_far_for_the_walk_planes_does_not_prune() {
+    // At |o| = 2^60 cells the walk's plane offsets (g0 + g)·r − o round together, so its start
+    // skips cells: here the ray along +x starts inside the sealed cavity x ∈ 128..=131 and
+    // first enters (132, 1, 1), a voxel without an exterior face. Pruning must give up.
+    let mut keys: Vec<VoxelKey> = Vec::new();
+    for x in 0..=300 {
+        for y in 0..=2 {
+            for z in 0..=2 {
+                if !((128..=131).contains(&x) && y == 1 && z == 1) {
+                    keys.push([x, y, z]);
+                }
+            }
+        }
+    }
+    let set = VoxelSet::from_keys(&keys, 1.0).unwrap();
+    let far = (1u64 << 60) as f64;
+    let cam = Camera::new(
+        Pose { center: [-far, 1.5, 1.5], look_at: [0.0, 1.5, 1.5], roll: 0.0 },
+        Intrinsics::from_fov(513, 513, 45.0, 45.0),
+    );
+    let caster = InverseCaster::with_max_range(&set, 1e19);
+    let hidden = set.index_of([132, 1, 1]).unwrap();
+    let mut full = vec![0u64; set.len().div_ceil(64)];
+    caster.observe_into(&cam, &mut full);
+    assert_eq!(full[hidden >> 6] >> (hidden & 63) & 1, 1, "the rounded walk enters the sealed voxel");
+    let mut acc = vec![0u64; full.len()];
+    for i in (0..set.len()).filter(|&i| i != hidden) {
+        acc[i >> 6] |= 1 << (i & 63);
+    }
+    caster.observe_union_into(&cam, &mut acc);
+    assert_eq!(acc[hidden >> 6] >> (hidden & 63) & 1, 1, "the pruned union finds it too");
 }

@@ -15,6 +15,7 @@ use super::{pixel_ray_direction, DEFAULT_MAX_RANGE};
 use crate::key::center_of;
 use crate::set::VoxelSet;
 use objview_render::Camera;
+use std::sync::OnceLock;
 
 /// In a pruned union view with at most this many needed pixels, the first pass marks only the
 /// voxel centres' pixels and the rays walk from the grid box entry (a speed setting only).
@@ -31,11 +32,30 @@ pub struct InverseCaster<'a> {
     pub(super) dims: [usize; 3],
     pub(super) strides: [usize; 3],
     pub(super) max_range: f64,
-    /// Per voxel, its open faces ([`super::prune::open_faces`]), for
-    /// [`InverseCaster::observe_union_into`].
-    pub(super) open: Vec<u8>,
+    /// Per voxel, its open faces ([`super::prune::open_faces`]), and the bitset over set
+    /// indices of the voxels with one: for [`InverseCaster::observe_union_into`] only, so made
+    /// by its first call.
+    pub(super) open: OnceLock<OpenFaces>,
+}
+
+/// The open faces of a set's voxels ([`super::prune::open_faces`]).
+#[derive(Debug, Clone)]
+pub(super) struct OpenFaces {
+    /// Per voxel (set index), bit 2a for +a, 2a + 1 for −a.
+    pub(super) faces: Vec<u8>,
     /// Bitset over set indices: the voxels with an open face.
-    pub(super) open_any: Vec<u64>,
+    pub(super) any: Vec<u64>,
+}
+
+impl OpenFaces {
+    pub(super) fn of(set: &VoxelSet) -> OpenFaces {
+        let faces = open_faces(set);
+        let mut any = vec![0u64; set.len().div_ceil(64)];
+        for (i, _) in faces.iter().enumerate().filter(|(_, &o)| o != 0) {
+            any[i >> 6] |= 1 << (i & 63);
+        }
+        OpenFaces { faces, any }
+    }
 }
 
 impl<'a> InverseCaster<'a> {
@@ -49,12 +69,7 @@ impl<'a> InverseCaster<'a> {
     pub fn with_max_range(set: &'a VoxelSet, max_range: f64) -> InverseCaster<'a> {
         let dims = set.grid_dims();
         let strides = [dims[1] * dims[2], dims[2], 1];
-        let open = open_faces(set);
-        let mut open_any = vec![0u64; set.len().div_ceil(64)];
-        for (i, _) in open.iter().enumerate().filter(|(_, &o)| o != 0) {
-            open_any[i >> 6] |= 1 << (i & 63);
-        }
-        InverseCaster { set, field: distance_field(set), dims, strides, max_range, open, open_any }
+        InverseCaster { set, field: distance_field(set), dims, strides, max_range, open: OnceLock::new() }
     }
 
     /// The set this caster walks.

@@ -197,15 +197,14 @@ impl<'a> Visibility<'a> {
     ) -> Visibility<'a> {
         let caster = match mode {
             VisibilityMode::Inverse => InverseCaster::with_max_range(set, max_range),
-            // Mesh mode never walks rays: skip the distance field and the open faces.
+            // Mesh mode never walks rays: skip the distance field.
             VisibilityMode::Mesh => InverseCaster {
                 set,
                 field: Vec::new(),
                 dims: set.grid_dims(),
                 strides: [0; 3],
                 max_range,
-                open: Vec::new(),
-                open_any: Vec::new(),
+                open: std::sync::OnceLock::new(),
             },
         };
         Visibility { mode, mesh, caster }

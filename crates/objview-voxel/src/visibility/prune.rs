@@ -4,7 +4,8 @@
 //! every ray can only re-find a voxel it already has.
 //!
 //! A voxel y not in the union is *live* in a view when the view's walks could enter it first.
-//! For a camera outside the grid box (pruning gives up otherwise):
+//! For a camera outside the grid box (pruning gives up otherwise, and for a camera so far away,
+//! more than 2^40 cells, that the walk's plane offsets round together):
 //! - the walk is 6-connected (each step crosses one plane) and starts outside the set, so the
 //!   cell it visits just before y is a face neighbour of y that is not in S_gt and that a
 //!   6-connected path of cells not in S_gt joins to the grid's boundary (an *exterior* cell,
@@ -22,6 +23,7 @@
 //! union, and are not cast. The rays that are cast are cast exactly as by `observe_into`, so
 //! the union is the same, bit for bit.
 
+use super::caster::OpenFaces;
 use super::project::TILE;
 use super::InverseCaster;
 use crate::key::center_of;
@@ -31,6 +33,9 @@ use objview_render::Camera;
 /// Pruning gives up when more than 1/`LIVE_LIMIT` of the voxels are live (a speed setting
 /// only: the result is the same either way).
 const LIVE_LIMIT: usize = 8;
+
+/// Pruning gives up for cameras farther than this many cells from the origin on some axis.
+const FAR: f64 = (1u64 << 40) as f64;
 
 /// Widest footprint half-width (pixels) that is marked; a wider one gives up pruning.
 const MAX_MARK: f64 = 64.0;
@@ -43,40 +48,44 @@ const MAX_MARK: f64 = 64.0;
 /// (surfaces sealed inside others — a cavity, the part of a handle inside a wall — have none).
 pub(super) fn open_faces(set: &VoxelSet) -> Vec<u8> {
     let [nx, ny, nz] = set.grid_dims();
-    let idx = |g: [usize; 3]| (g[0] * ny + g[1]) * nz + g[2];
+    let cells = nx * ny * nz;
+    // Cell ids (x·ny + y)·nz + z fit in u32: a grid holds at most `MAX_GRID_CELLS` = 2^30.
+    let id = |g: [usize; 3]| (g[0] * ny + g[1]) * nz + g[2];
+    let cell = |i: usize| [i / (ny * nz), i / nz % ny, i % nz];
     let occupied = |g: [usize; 3]| set.bit(set.bit_of_cell(g));
-    let mut exterior = vec![false; nx * ny * nz];
-    let mut stack = Vec::new();
+    // Breadth-first flood fill from the boundary (the queue holds a wavefront, not the grid);
+    // one bit per cell.
+    let mut exterior = vec![0u64; cells.div_ceil(64)];
+    let is_ext = |e: &[u64], i: usize| e[i >> 6] >> (i & 63) & 1 == 1;
+    let mut queue = std::collections::VecDeque::new();
+    let visit = |e: &mut [u64], q: &mut std::collections::VecDeque<u32>, g: [usize; 3]| {
+        let i = id(g);
+        if !is_ext(e, i) && !occupied(g) {
+            e[i >> 6] |= 1 << (i & 63);
+            q.push_back(i as u32);
+        }
+    };
     for x in 0..nx {
         for y in 0..ny {
             for z in 0..nz {
-                let boundary = x == 0 || y == 0 || z == 0 || x == nx - 1 || y == ny - 1 || z == nz - 1;
-                if boundary && !occupied([x, y, z]) && !exterior[idx([x, y, z])] {
-                    exterior[idx([x, y, z])] = true;
-                    stack.push([x, y, z]);
+                if x == 0 || y == 0 || z == 0 || x == nx - 1 || y == ny - 1 || z == nz - 1 {
+                    visit(&mut exterior, &mut queue, [x, y, z]);
                 }
             }
         }
     }
-    while let Some(g) = stack.pop() {
+    while let Some(i) = queue.pop_front() {
+        let g = cell(i as usize);
         for a in 0..3 {
-            for up in [false, true] {
+            if g[a] + 1 < [nx, ny, nz][a] {
                 let mut n = g;
-                if up {
-                    if n[a] + 1 == [nx, ny, nz][a] {
-                        continue;
-                    }
-                    n[a] += 1;
-                } else {
-                    if n[a] == 0 {
-                        continue;
-                    }
-                    n[a] -= 1;
-                }
-                if !exterior[idx(n)] && !occupied(n) {
-                    exterior[idx(n)] = true;
-                    stack.push(n);
-                }
+                n[a] += 1;
+                visit(&mut exterior, &mut queue, n);
+            }
+            if g[a] > 0 {
+                let mut n = g;
+                n[a] -= 1;
+                visit(&mut exterior, &mut queue, n);
             }
         }
     }
@@ -88,11 +97,11 @@ pub(super) fn open_faces(set: &VoxelSet) -> Vec<u8> {
             let mut m = 0u8;
             for a in 0..3 {
                 // The set's margin keeps every voxel's face neighbours inside the grid.
-                let mut n = g;
-                n[a] += 1;
-                m |= (exterior[idx(n)] as u8) << (2 * a);
-                n[a] -= 2;
-                m |= (exterior[idx(n)] as u8) << (2 * a + 1);
+                let (mut up, mut down) = (g, g);
+                up[a] += 1;
+                down[a] -= 1;
+                m |= (is_ext(&exterior, id(up)) as u8) << (2 * a);
+                m |= (is_ext(&exterior, id(down)) as u8) << (2 * a + 1);
             }
             m
         })
@@ -115,36 +124,46 @@ impl InverseCaster<'_> {
         }
         let g0 = set.grid_origin();
         let cam: [f64; 3] = std::array::from_fn(|a| (o[a] / r).floor());
+        // Far away (|o / r| > 2^40 on some axis) the plane offsets `(g0 + g)·r − o` of the
+        // walk round together and its start may skip cells (a walk could then begin inside a
+        // sealed cavity); no view of the benchmark is near that.
+        if cam.iter().any(|c| c.abs() > FAR) {
+            return false;
+        }
         let near_grid = (0..3)
             .all(|a| cam[a] >= g0[a] as f64 - 2.0 && cam[a] <= g0[a] as f64 + self.dims[a] as f64 + 1.0);
         if near_grid {
             return false;
         }
+        let k = &camera.intrinsics;
+        if k.width == 0 || k.height == 0 {
+            return false;
+        }
+        let open = self.open.get_or_init(|| OpenFaces::of(set));
         // Live voxels, 64 per word (the bitset's words): among those not in `acc` that have an
         // open face at all.
         let keys = set.keys();
         let limit = set.len() / LIVE_LIMIT;
         let mut live = vec![0u64; acc.len()];
         let mut count = 0usize;
-        for (c, (&a, &any)) in acc.iter().zip(&self.open_any).enumerate() {
+        for (c, (&a, &any)) in acc.iter().zip(&open.any).enumerate() {
             let mut cand = !a & any;
             while cand != 0 {
                 let j = cand.trailing_zeros() as usize;
                 cand &= cand - 1;
-                let (k, open) = (keys[c * 64 + j], self.open[c * 64 + j]);
+                let (key, faces) = (keys[c * 64 + j], open.faces[c * 64 + j]);
                 let mut facing = 0u8;
                 for a in 0..3 {
-                    let ka = k[a] as f64;
+                    let ka = key[a] as f64;
                     facing |= ((ka <= cam[a]) as u8) << (2 * a) | ((ka >= cam[a]) as u8) << (2 * a + 1);
                 }
-                live[c] |= ((open & facing != 0) as u64) << j;
+                live[c] |= ((faces & facing != 0) as u64) << j;
             }
             count += live[c].count_ones() as usize;
             if count > limit {
                 return false;
             }
         }
-        let k = &camera.intrinsics;
         let (w, h) = (k.width as usize, k.height as usize);
         let mtw = w.div_ceil(TILE);
         let rho = 0.5 * 3f64.sqrt() * r; // circumradius of a voxel box

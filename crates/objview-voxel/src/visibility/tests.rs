@@ -175,3 +175,105 @@ fn open_faces_are_the_exterior_face_neighbours() {
     assert_eq!(of([4, 2, 2]), 0b000011);
     assert_eq!(of([2, 3, 4]), 0b111000, "next to the hole: −y (the hole), +z, −z (the cavity)");
 }
+
+#[test]
+fn needed_pixels_cover_every_pixel_centre_in_a_live_footprint() {
+    use super::project::TILE;
+    use super::prune::open_faces;
+    use crate::key::center_of;
+    use objview_geom::Pose;
+    use objview_render::{Camera, Intrinsics};
+    use rand::{Rng, SeedableRng};
+    // A shell of r = 0.1 voxels; the union holds all but a scattered few, so pruning marks the
+    // footprints of those that are live. Images whose size is no multiple of the 8-pixel tiles,
+    // off-centre principal points, one mirrored.
+    let r = 0.1;
+    let mut keys = Vec::new();
+    for x in -8..8 {
+        for y in -8..8 {
+            for z in -8..8 {
+                let d2 = (x * x + y * y + z * z) as f64;
+                if (36.0..64.0).contains(&d2) {
+                    keys.push([x, y, z]);
+                }
+            }
+        }
+    }
+    let set = VoxelSet::from_keys(&keys, r).unwrap();
+    let caster = InverseCaster::new(&set);
+    let open = open_faces(&set);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let mut marked_total = 0;
+    for trial in 0..12 {
+        let k = Intrinsics {
+            width: 517 - 37 * (trial % 3),
+            height: 389 + 13 * (trial % 4),
+            fx: if trial % 5 == 4 { -500.0 } else { 480.0 },
+            fy: 470.0,
+            cx: 240.3 + 3.0 * trial as f64,
+            cy: 190.7,
+            ..Intrinsics::default()
+        };
+        let dir: [f64; 3] = std::array::from_fn(|_| rng.gen_range(-1.0..1.0));
+        let n = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
+        let rad = rng.gen_range(2.5..4.0);
+        let cam = Camera::new(
+            Pose { center: std::array::from_fn(|a| rad * dir[a] / n), look_at: [0.0; 3], roll: 0.3 },
+            k,
+        );
+        let mut acc = vec![u64::MAX; set.len().div_ceil(64)];
+        for _ in 0..set.len() / 40 {
+            let i = rng.gen_range(0..set.len());
+            acc[i >> 6] &= !(1 << (i & 63));
+        }
+        let (w, h) = (k.width as usize, k.height as usize);
+        let mtw = w.div_ceil(TILE);
+        let mut need = vec![0u64; mtw * h.div_ceil(TILE)];
+        assert!(caster.needed_pixels(&cam, &acc, &mut need), "trial {trial}: pruning gave up");
+        let mut want = vec![false; w * h];
+        // Brute force: the live voxels (not in acc, an exterior face turned to the camera),
+        // then every pixel centre within each one's footprint, pixel by pixel.
+        let o = cam.center;
+        let camc: [f64; 3] = std::array::from_fn(|a| (o[a] / r).floor());
+        let rho = 0.5 * 3f64.sqrt() * r;
+        let (afx, afy) = (k.fx.abs() * (1.0 + 1e-9), k.fy.abs() * (1.0 + 1e-9));
+        for (i, key) in set.keys().iter().enumerate() {
+            let facing = (0..3).fold(0u8, |m, a| {
+                let ka = key[a] as f64;
+                m | ((ka <= camc[a]) as u8) << (2 * a) | ((ka >= camc[a]) as u8) << (2 * a + 1)
+            });
+            if acc[i >> 6] >> (i & 63) & 1 == 1 || open[i] & facing == 0 {
+                continue;
+            }
+            let pc = cam.to_camera(center_of(*key, r));
+            let z = pc[2];
+            let (uc, vc) = (k.fx * pc[0] / z + k.cx, k.fy * pc[1] / z + k.cy);
+            let dist = (pc[0] * pc[0] + pc[1] * pc[1] + z * z).sqrt();
+            let hr = rho * dist / (z * (z - rho));
+            let (hu, hv) = (afx * hr + 1.0, afy * hr + 1.0);
+            for v in 0..h {
+                for u in 0..w {
+                    if (u as f64 + 0.5 - uc).abs() <= hu && (v as f64 + 0.5 - vc).abs() <= hv {
+                        let bit = need[(v / TILE) * mtw + u / TILE] >> ((v % TILE) * TILE + u % TILE) & 1;
+                        assert_eq!(bit, 1, "trial {trial}: pixel ({u}, {v}) of voxel {key:?}");
+                        want[v * w + u] = true;
+                    }
+                }
+            }
+        }
+        // And nothing far from them: a marked pixel is in a footprint or just before one (the
+        // marked range starts up to one pixel early on each axis).
+        for v in 0..h {
+            for u in 0..w {
+                if need[(v / TILE) * mtw + u / TILE] >> ((v % TILE) * TILE + u % TILE) & 1 == 1 {
+                    let near = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                        .iter()
+                        .any(|&(du, dv)| u + du < w && v + dv < h && want[(v + dv) * w + u + du]);
+                    assert!(near, "trial {trial}: pixel ({u}, {v}) marked outside every footprint");
+                    marked_total += 1;
+                }
+            }
+        }
+    }
+    assert!(marked_total > 1000, "{marked_total}");
+}

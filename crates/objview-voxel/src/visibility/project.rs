@@ -29,6 +29,25 @@ pub(crate) fn pixel_of(k: &objview_render::Intrinsics, p: [f64; 3]) -> Option<(u
     }
 }
 
+/// The footprint factor of a voxel box of circumradius `rho` whose centre lies at camera depth
+/// `z` > `rho` and distance `dist` from the camera centre: every point q of the ball of radius
+/// `rho` around the centre pc has |q_x/q_z − x/z| ≤ `rho`·|pc| / (z·(z − `rho`)) (likewise
+/// for y), see [`InverseCaster::project_voxels`].
+#[inline(always)]
+pub(super) fn footprint_factor(rho: f64, dist: f64, z: f64) -> f64 {
+    rho * dist / (z * (z - rho))
+}
+
+/// The conservative footprint's half-widths (pixels) from [`footprint_factor`] `hr` and the
+/// focal lengths' magnitudes (rounded up): every pixel centre whose ray meets the voxel's box
+/// lies within them of the projected voxel centre (one pixel of rounding margin included).
+/// Shared by the depth bound and the union's ray pruning (`prune`), which rely on the same
+/// property.
+#[inline(always)]
+pub(super) fn footprint_half_widths(hr: f64, afx: f64, afy: f64) -> (f64, f64) {
+    (afx * hr + 1.0, afy * hr + 1.0)
+}
+
 impl InverseCaster<'_> {
     /// The mask half of [`InverseCaster::project_voxels`]: marks each voxel's pixel in `mask`
     /// where the pixel's tile has a bit in `need` (the same arithmetic, so the same pixels).
@@ -97,7 +116,7 @@ impl InverseCaster<'_> {
                 let (uc, vc) = (k.fx * pc[0] / z + k.cx, k.fy * pc[1] / z + k.cy);
                 let dist = (pc[0] * pc[0] + pc[1] * pc[1] + z * z).sqrt();
                 // Used only where z > z_foot (see below).
-                let hr = rho * dist / (z * (z - rho));
+                let hr = footprint_factor(rho, dist, z);
                 *val = [z, uc, vc, dist, hr];
             }
             for &[z, uc, vc, dist, hr] in &vals[..keys.len()] {
@@ -120,7 +139,7 @@ impl InverseCaster<'_> {
                 // meets the box does so at a point projecting to that centre, so the centre lies
                 // within this half-width (plus one pixel of rounding margin) of the projected voxel
                 // centre.
-                let (hu, hv) = (afx * hr + 1.0, afy * hr + 1.0);
+                let (hu, hv) = footprint_half_widths(hr, afx, afy);
                 // Cells whose pixel centres u + 0.5 can lie in [uc − hu, uc + hu]: from a0 to a1
                 // (floors) below.
                 let (a0, b0) = ((uc - hu - 0.5) * inv_cell, (vc - hv - 0.5) * inv_cell);

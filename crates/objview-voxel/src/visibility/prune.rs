@@ -24,7 +24,7 @@
 //! the union is the same, bit for bit.
 
 use super::caster::OpenFaces;
-use super::project::TILE;
+use super::project::{footprint_factor, footprint_half_widths, TILE};
 use super::InverseCaster;
 use crate::key::center_of;
 use crate::set::VoxelSet;
@@ -183,8 +183,8 @@ impl InverseCaster<'_> {
                 let dist = (pc[0] * pc[0] + pc[1] * pc[1] + z * z).sqrt();
                 // The footprint of `project_voxels`: every pixel centre whose ray meets the box
                 // lies within (hu, hv) of (uc, vc).
-                let hr = rho * dist / (z * (z - rho));
-                let (hu, hv) = (afx * hr + 1.0, afy * hr + 1.0);
+                let hr = footprint_factor(rho, dist, z);
+                let (hu, hv) = footprint_half_widths(hr, afx, afy);
                 if !(hu <= MAX_MARK && hv <= MAX_MARK) {
                     return false;
                 }

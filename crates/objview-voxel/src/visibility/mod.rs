@@ -65,9 +65,10 @@
 //! for every grid size but the planning set's 128), [`InverseCaster::observe_union_into`] casts
 //! only the pixels whose rays may still see a voxel the union does not hold: the footprints of
 //! the voxels not yet in it that have an exterior face neighbour on a face turned to the camera
-//! (`prune`). The same union, bit for bit; on the mug's 3,032-view sweep 4.64 → 2.25 s on one
-//! core (Intel Xeon VM, 2026-12-05), because once a set's union holds the visible surface
-//! almost no voxel is live (tammes-492: 12.4M rays → 0.13M).
+//! (`prune`). The same union, bit for bit; on the mug's 3,032-view sweep 4.54 → 1.09 s on one
+//! core (Intel Xeon VM, 2026-12-05; the threads of a sweep share its unions,
+//! [`Visibility::union_all`]), because once a set's union holds the visible surface almost no
+//! voxel is live (tammes-492: 12.4M rays → 0.13M).
 //!
 //! Layout: the modes, [`Visibility`] and the one-call functions are here; `caster` holds
 //! [`InverseCaster`] and its entry points, `project` the first pass, `walk` the ray set-up and

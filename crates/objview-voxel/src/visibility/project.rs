@@ -48,6 +48,50 @@ pub(super) fn footprint_half_widths(hr: f64, afx: f64, afy: f64) -> (f64, f64) {
     (afx * hr + 1.0, afy * hr + 1.0)
 }
 
+/// The constants of the conservative footprint for one view: the voxel box's circumradius
+/// `rho`, the depth `z_foot` above which a footprint is bounded, and the focal lengths'
+/// magnitudes rounded up. One definition for the depth bound and the union's pruning.
+pub(super) struct FootprintConsts {
+    pub(super) rho: f64,
+    pub(super) z_foot: f64,
+    pub(super) afx: f64,
+    pub(super) afy: f64,
+}
+
+impl FootprintConsts {
+    pub(super) fn new(r: f64, k: &objview_render::Intrinsics) -> FootprintConsts {
+        let rho = 0.5 * 3f64.sqrt() * r; // circumradius of a voxel box
+        FootprintConsts {
+            rho,
+            z_foot: rho * 1.000_001 + 1e-9,
+            afx: k.fx.abs() * (1.0 + 1e-9),
+            afy: k.fy.abs() * (1.0 + 1e-9),
+        }
+    }
+}
+
+/// Camera-frame centre of voxel `key` (resolution `r`) and its projected image coordinates:
+/// `pixel_of`'s `Intrinsics::project` arithmetic inlined, so the same pixel.
+#[inline(always)]
+pub(super) fn project_centre(camera: &Camera, key: crate::VoxelKey, r: f64) -> ([f64; 3], f64, f64) {
+    let k = &camera.intrinsics;
+    let pc = camera.to_camera(center_of(key, r));
+    (pc, k.fx * pc[0] / pc[2] + k.cx, k.fy * pc[1] / pc[2] + k.cy)
+}
+
+/// The pixel of a projected centre at depth `z` in a `wf` × `hf` image (`pixel_of` without
+/// `f64::floor`), as the word of its 8×8 tile (`mtw` tiles per row) and the bit in it.
+#[inline(always)]
+pub(super) fn centre_bit(z: f64, uc: f64, vc: f64, wf: f64, hf: f64, mtw: usize) -> Option<(usize, u64)> {
+    if z > 1e-9 && uc >= 0.0 && vc >= 0.0 && uc < wf && vc < hf {
+        // In [0, w) × [0, h): truncation is the floor.
+        let (u, v) = (uc as i64 as usize, vc as i64 as usize);
+        Some(((v / TILE) * mtw + u / TILE, 1u64 << ((v % TILE) * TILE + u % TILE)))
+    } else {
+        None
+    }
+}
+
 impl InverseCaster<'_> {
     /// The mask half of [`InverseCaster::project_voxels`]: marks each voxel's pixel in `mask`
     /// where the pixel's tile has a bit in `need` (the same arithmetic, so the same pixels).
@@ -62,16 +106,13 @@ impl InverseCaster<'_> {
         let mut vals = [[0.0f64; 3]; CHUNK];
         for keys in set.keys().chunks(CHUNK) {
             for (val, key) in vals.iter_mut().zip(keys) {
-                let pc = camera.to_camera(center_of(*key, r));
-                let z = pc[2];
-                *val = [z, k.fx * pc[0] / z + k.cx, k.fy * pc[1] / z + k.cy];
+                let (pc, uc, vc) = project_centre(camera, *key, r);
+                *val = [pc[2], uc, vc];
             }
             for &[z, uc, vc] in &vals[..keys.len()] {
-                if z > 1e-9 && uc >= 0.0 && vc >= 0.0 && uc < wf && vc < hf {
-                    let (u, v) = (uc as i64 as usize, vc as i64 as usize);
-                    let t = (v / TILE) * mtw + u / TILE;
+                if let Some((t, bit)) = centre_bit(z, uc, vc, wf, hf, mtw) {
                     if need[t] != 0 {
-                        mask[t] |= 1u64 << ((v % TILE) * TILE + u % TILE);
+                        mask[t] |= bit;
                     }
                 }
             }
@@ -93,10 +134,8 @@ impl InverseCaster<'_> {
         let mtw = w.div_ceil(TILE);
         let (tw, th) = (w.div_ceil(CELL), h.div_ceil(CELL));
         let mut global_min = f64::INFINITY;
-        let rho = 0.5 * 3f64.sqrt() * r; // circumradius of a voxel box
-        let z_foot = rho * 1.000_001 + 1e-9;
+        let FootprintConsts { rho, z_foot, afx, afy } = FootprintConsts::new(r, k);
         let (wf, hf) = (w as f64, h as f64);
-        let (afx, afy) = (k.fx.abs() * (1.0 + 1e-9), k.fy.abs() * (1.0 + 1e-9));
         let inv_cell = 1.0 / CELL as f64; // exact: CELL is a power of two
         let (twi, thi) = (tw as i32, th as i32);
         let mut block_min = vec![f64::INFINITY; tw * th];
@@ -109,21 +148,16 @@ impl InverseCaster<'_> {
         let mut vals = [[0.0f64; 5]; CHUNK];
         for keys in set.keys().chunks(CHUNK) {
             for (val, key) in vals.iter_mut().zip(keys) {
-                let pc = camera.to_camera(center_of(*key, r));
+                let (pc, uc, vc) = project_centre(camera, *key, r);
                 let z = pc[2];
-                // `pixel_of` inlined: the same `Intrinsics::project` arithmetic, so the same
-                // pixel.
-                let (uc, vc) = (k.fx * pc[0] / z + k.cx, k.fy * pc[1] / z + k.cy);
                 let dist = (pc[0] * pc[0] + pc[1] * pc[1] + z * z).sqrt();
                 // Used only where z > z_foot (see below).
                 let hr = footprint_factor(rho, dist, z);
                 *val = [z, uc, vc, dist, hr];
             }
             for &[z, uc, vc, dist, hr] in &vals[..keys.len()] {
-                if z > 1e-9 && uc >= 0.0 && vc >= 0.0 && uc < wf && vc < hf {
-                    // In [0, w) × [0, h): truncation is the floor.
-                    let (u, v) = (uc as i64 as usize, vc as i64 as usize);
-                    mask[(v / TILE) * mtw + u / TILE] |= 1u64 << ((v % TILE) * TILE + u % TILE);
+                if let Some((t, bit)) = centre_bit(z, uc, vc, wf, hf, mtw) {
+                    mask[t] |= bit;
                 }
                 let near = dist - rho;
                 let near = near - 1e-9 * near.abs() - 1e-12;

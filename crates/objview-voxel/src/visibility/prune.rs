@@ -24,9 +24,8 @@
 //! the union is the same, bit for bit.
 
 use super::caster::OpenFaces;
-use super::project::{footprint_factor, footprint_half_widths, TILE};
+use super::project::{footprint_factor, footprint_half_widths, project_centre, FootprintConsts, TILE};
 use super::InverseCaster;
-use crate::key::center_of;
 use crate::set::VoxelSet;
 use objview_render::Camera;
 
@@ -166,20 +165,17 @@ impl InverseCaster<'_> {
         }
         let (w, h) = (k.width as usize, k.height as usize);
         let mtw = w.div_ceil(TILE);
-        let rho = 0.5 * 3f64.sqrt() * r; // circumradius of a voxel box
-        let z_foot = rho * 1.000_001 + 1e-9;
-        let (afx, afy) = (k.fx.abs() * (1.0 + 1e-9), k.fy.abs() * (1.0 + 1e-9));
+        let FootprintConsts { rho, z_foot, afx, afy } = FootprintConsts::new(r, k);
         for (c, &word) in live.iter().enumerate() {
             let mut word = word;
             while word != 0 {
                 let i = c * 64 + word.trailing_zeros() as usize;
                 word &= word - 1;
-                let pc = camera.to_camera(center_of(keys[i], r));
+                let (pc, uc, vc) = project_centre(camera, keys[i], r);
                 let z = pc[2];
                 if z <= z_foot || z.is_nan() {
                     return false; // unbounded footprint (or NaN)
                 }
-                let (uc, vc) = (k.fx * pc[0] / z + k.cx, k.fy * pc[1] / z + k.cy);
                 let dist = (pc[0] * pc[0] + pc[1] * pc[1] + z * z).sqrt();
                 // The footprint of `project_voxels`: every pixel centre whose ray meets the box
                 // lies within (hu, hv) of (uc, vc).

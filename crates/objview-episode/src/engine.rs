@@ -58,6 +58,79 @@ pub struct Scene {
     pub(crate) targets: std::sync::OnceLock<Arc<FreshTargets>>,
     /// The reference's exact-distance index in [`Coverage::points`] order (the oracle's).
     pub(crate) reference_targets: std::sync::OnceLock<Arc<Targets>>,
+    /// The state of an episode after its start view, per start (see [`StartStates`]).
+    pub(crate) starts: StartStates,
+}
+
+/// What an episode's start view depends on besides the scene: every setting, whether a budget
+/// checkpoint falls on the start view (K = 0; the budget and method matter for nothing else
+/// there), the start pose (bit for bit) and the intrinsics.
+#[derive(Debug, Clone, PartialEq)]
+struct StartKey {
+    settings: EpisodeSettings,
+    checkpoint_at_start: bool,
+    pose: [u64; 7],
+    intrinsics: Intrinsics,
+}
+
+/// An episode's state right after [`Episode::start`] took and scored its start view: every
+/// field the start view wrote.
+#[derive(Debug, Clone)]
+struct StartState {
+    fused: FusedCloud,
+    gt: Coverage,
+    reference: Coverage,
+    gt_near: Targets,
+    slot_gt_d2: Vec<f64>,
+    cd_seen: u32,
+    cd_now: Option<f64>,
+    ms: Vec<Stabilization>,
+    history: Vec<Pose>,
+    steps: Vec<Step>,
+    checkpoints: BTreeMap<CheckpointKey, Checkpoint>,
+    path_cost: f64,
+    frame: Frame,
+}
+
+/// The start states of a scene's episodes, by [`StartKey`]: every episode on a scene with the
+/// same settings and start pose takes the same start view, so the first one's state after it
+/// is copied instead of rendered, fused and scored again (the same state, bit for bit; only
+/// the start step's timings differ). At most [`MAX_START_STATES`] starts are kept (the first
+/// ones seen; ~25 MB each on a 100k-triangle object with a 300k-point ground truth: the
+/// coverage and distance state of every target point, the fused cloud, the depth frame). A clone of a [`Scene`] starts empty, so
+/// a changed copy never reuses a state of the original.
+#[derive(Debug, Default)]
+pub(crate) struct StartStates(std::sync::Mutex<Vec<(StartKey, Arc<StartState>)>>);
+
+/// How many start states a scene keeps: the first ones seen (an episode's state right after
+/// its start view, per settings and start pose, which later episodes copy instead of taking
+/// the start view again).
+pub const MAX_START_STATES: usize = 2;
+
+impl Clone for StartStates {
+    fn clone(&self) -> Self {
+        StartStates::default()
+    }
+}
+
+impl StartStates {
+    fn get(&self, key: &StartKey) -> Option<Arc<StartState>> {
+        let list = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        list.iter().find(|(k, _)| k == key).map(|(_, s)| s.clone())
+    }
+
+    fn remember(&self, key: StartKey, state: impl FnOnce() -> StartState) {
+        let mut list = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        if list.len() < MAX_START_STATES && !list.iter().any(|(k, _)| *k == key) {
+            list.push((key, Arc::new(state())));
+        }
+    }
+
+    /// How many start states are kept.
+    #[cfg(test)]
+    pub(crate) fn len(&self) -> usize {
+        self.0.lock().unwrap_or_else(|e| e.into_inner()).len()
+    }
 }
 
 /// The target sets of a new episode: coverage of the ground truth (SC) and of the reference
@@ -209,6 +282,66 @@ impl Episode {
         settings.validate().map_err(EpisodeError::Settings)?;
         check_view_pose(&start_pose.to_array())
             .map_err(|e| EpisodeError::Settings(format!("start pose {:?}: {e}", start_pose.to_array())))?;
+        let mut ks = settings.checkpoint_ks.clone();
+        if let (Budget::Fixed(k), ExecutionMode::Iterative) = (budget, method.mode) {
+            ks.push(k);
+        }
+        ks.sort_unstable();
+        ks.dedup();
+        let key = StartKey {
+            settings: settings.clone(),
+            checkpoint_at_start: ks.contains(&0),
+            pose: start_pose.to_array().map(f64::to_bits),
+            intrinsics: scene.intrinsics,
+        };
+        if let Some(state) = scene.starts.get(&key) {
+            let StartState {
+                fused,
+                gt,
+                reference,
+                gt_near,
+                slot_gt_d2,
+                cd_seen,
+                cd_now,
+                ms,
+                history,
+                mut steps,
+                checkpoints,
+                path_cost,
+                frame,
+            } = (*state).clone();
+            if settings.record_timings {
+                // The start step's engine time is the copy's (stage "rest").
+                let t = started.elapsed().as_secs_f64();
+                steps[0].engine_seconds = t;
+                steps[0].stage_seconds = [0.0, 0.0, 0.0, t];
+            }
+            return Ok(Episode {
+                fused,
+                gt,
+                reference,
+                gt_near,
+                slot_gt_d2,
+                cd_seen,
+                cd_now,
+                ms,
+                history,
+                steps,
+                checkpoints,
+                ks,
+                runtime: 0.0,
+                path_cost,
+                terminal: None,
+                frame,
+                started,
+                scene,
+                settings,
+                method,
+                budget,
+                seed,
+                start_pose,
+            });
+        }
         let fresh = scene.fresh_targets(&settings.taus)?;
         let h = settings.fusion_voxel;
         // The fused cloud's fine keys lie in its domain's blocks (any outside are still counted).
@@ -220,12 +353,6 @@ impl Episode {
                 Stabilization::with_box(d, h, settings.ms_growth, settings.ms_stable_steps, fine_lo, fine_hi)
             })
             .collect();
-        let mut ks = settings.checkpoint_ks.clone();
-        if let (Budget::Fixed(k), ExecutionMode::Iterative) = (budget, method.mode) {
-            ks.push(k);
-        }
-        ks.sort_unstable();
-        ks.dedup();
         let cam = Camera::new(start_pose, scene.intrinsics);
         let mut ep = Episode {
             fused: FusedCloud::new(scene.domain.clone()),
@@ -262,7 +389,27 @@ impl Episode {
                 ep.scene.uid
             )));
         }
+        ep.scene.starts.remember(key, || ep.start_state());
         Ok(ep)
+    }
+
+    /// A copy of what the start view wrote (see [`StartStates`]).
+    fn start_state(&self) -> StartState {
+        StartState {
+            fused: self.fused.clone(),
+            gt: self.gt.clone(),
+            reference: self.reference.clone(),
+            gt_near: self.gt_near.clone(),
+            slot_gt_d2: self.slot_gt_d2.clone(),
+            cd_seen: self.cd_seen,
+            cd_now: self.cd_now,
+            ms: self.ms.clone(),
+            history: self.history.clone(),
+            steps: self.steps.clone(),
+            checkpoints: self.checkpoints.clone(),
+            path_cost: self.path_cost,
+            frame: self.frame.clone(),
+        }
     }
 
     /// The latest observation (what the planner sees).
@@ -652,4 +799,104 @@ fn panic_text(p: &Box<dyn std::any::Any + Send>) -> String {
         .map(|s| s.to_string())
         .or_else(|| p.downcast_ref::<String>().cloned())
         .unwrap_or_else(|| "panic".into())
+}
+
+#[cfg(test)]
+mod start_state_tests {
+    use super::*;
+    use crate::{Action, Scripted};
+    use objview_views::ViewSet;
+
+    /// A unit sphere in `whole` (its start states start empty).
+    fn sphere() -> Arc<Scene> {
+        static SPHERE: std::sync::OnceLock<Scene> = std::sync::OnceLock::new();
+        // A clone: the same content, no start states.
+        Arc::new(SPHERE.get_or_init(build_sphere).clone())
+    }
+
+    fn build_sphere() -> Scene {
+        let mesh = objview_render::bench::icosphere(3);
+        let gt = objview_geom::cloud::sample_surface(&mesh, 20_000, 1);
+        let space = ViewSpace::builtin("whole").unwrap();
+        let settings = EpisodeSettings { record_timings: false, ..Default::default() };
+        crate::scene_from_parts("sphere", mesh, gt, "sampled".into(), &space, "whole", &settings, None)
+            .unwrap()
+    }
+
+    /// Three moves then whatever the budget allows, as a JSON line (timings off).
+    fn run(scene: &Arc<Scene>, settings: &EpisodeSettings, budget: Budget, start: Pose) -> String {
+        let candidates = Arc::new(ViewSet::resolve("tammes-360").unwrap().poses(3.0));
+        let moves: Vec<Action> =
+            [7usize, 100, 250].iter().map(|&i| Action::Move { pose: candidates[i].to_array() }).collect();
+        let mut p = Scripted::new(moves, ExecutionMode::Iterative);
+        let r =
+            run_episode(scene.clone(), &mut p, settings, budget, 3, start, candidates, serde_json::json!({}))
+                .unwrap();
+        serde_json::to_string(&r).unwrap()
+    }
+
+    #[test]
+    fn a_copied_start_state_gives_the_episode_a_fresh_start_would() {
+        let s = EpisodeSettings { record_timings: false, checkpoint_ks: vec![2, 3], ..Default::default() };
+        let a = objview_views::start_pose(3.0);
+        let b = Pose::from_direction([1.0, -2.0, 0.5], 3.0);
+        let scene = sphere();
+        let first = run(&scene, &s, Budget::Fixed(3), a);
+        assert_eq!(scene.starts.len(), 1);
+        // The same start again (a copy), with another budget (which cannot change the start
+        // view), against another scene with the same content (a fresh start; a clone of a
+        // scene has no start states).
+        for budget in [Budget::Fixed(3), Budget::Auto] {
+            let copied = run(&scene, &s, budget, a);
+            let fresh = run(&sphere(), &s, budget, a);
+            assert_eq!(copied, fresh, "{budget:?}");
+        }
+        assert_eq!(copied_again(&scene, &s, a), first);
+        assert_eq!(scene.starts.len(), 1);
+        let cloned = Arc::new((*scene).clone());
+        assert_eq!(cloned.starts.len(), 0);
+        // Another start pose, other settings, a K = 0 checkpoint on the start view: each its
+        // own start state, equal to a fresh start's episode.
+        let other = EpisodeSettings { taus: vec![0.01, 0.05], ..s.clone() };
+        for (settings, budget, start) in
+            [(&s, Budget::Fixed(0), a), (&s, Budget::Fixed(3), b), (&other, Budget::Fixed(3), a)]
+        {
+            let got = run(&scene, settings, budget, start);
+            assert_eq!(got, run(&sphere(), settings, budget, start), "{budget:?} {start:?}");
+            // And a copy of it, the second time.
+            assert_eq!(run(&scene, settings, budget, start), got);
+        }
+        // Full after the K = 0 start (the other two were not kept, and were still right).
+        assert_eq!(scene.starts.len(), MAX_START_STATES);
+        // After a K = 0 start, an episode without one does not inherit its checkpoint.
+        assert!(!run(&scene, &s, Budget::Fixed(2), a).contains("\"K=0\""));
+        assert!(run(&scene, &s, Budget::Fixed(0), a).contains("\"K=0\""));
+    }
+
+    fn copied_again(scene: &Arc<Scene>, s: &EpisodeSettings, start: Pose) -> String {
+        run(scene, s, Budget::Fixed(3), start)
+    }
+
+    #[test]
+    fn a_copied_start_records_the_copy_as_its_engine_time() {
+        let s = EpisodeSettings { record_timings: true, ..Default::default() };
+        let scene = sphere();
+        let start = objview_views::start_pose(3.0);
+        let mut ep = Vec::new();
+        for _ in 0..2 {
+            let method = MethodInfo {
+                name: "t".into(),
+                family: Family::Classical,
+                mode: ExecutionMode::Iterative,
+                params: serde_json::json!({}),
+            };
+            ep.push(Episode::start(scene.clone(), s.clone(), method, Budget::Auto, 0, start).unwrap());
+        }
+        let (computed, copied) = (&ep[0].steps[0], &ep[1].steps[0]);
+        assert!(computed.stage_seconds[0] > 0.0 && computed.stage_seconds[1] > 0.0);
+        assert_eq!(copied.stage_seconds[..3], [0.0; 3]);
+        assert!(copied.engine_seconds > 0.0 && copied.stage_seconds[3] == copied.engine_seconds);
+        assert_eq!(copied.metrics, computed.metrics);
+        assert_eq!(copied.fused_points, computed.fused_points);
+    }
 }

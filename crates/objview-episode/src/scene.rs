@@ -82,5 +82,6 @@ pub fn scene_from_parts(
         intrinsics,
         targets: std::sync::OnceLock::new(),
         reference_targets: std::sync::OnceLock::new(),
+        starts: Default::default(),
     })
 }

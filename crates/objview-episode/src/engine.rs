@@ -119,10 +119,19 @@ impl StartStates {
         list.iter().find(|(k, _)| k == key).map(|(_, s)| s.clone())
     }
 
+    /// Keeps `state()` for `key` if there is room and none is kept yet (the copy is made
+    /// outside the lock: concurrent starts of the scene do not wait for it).
     fn remember(&self, key: StartKey, state: impl FnOnce() -> StartState) {
+        let room = |list: &Vec<(StartKey, Arc<StartState>)>| {
+            list.len() < MAX_START_STATES && !list.iter().any(|(k, _)| *k == key)
+        };
+        if !room(&self.0.lock().unwrap_or_else(|e| e.into_inner())) {
+            return;
+        }
+        let state = Arc::new(state());
         let mut list = self.0.lock().unwrap_or_else(|e| e.into_inner());
-        if list.len() < MAX_START_STATES && !list.iter().any(|(k, _)| *k == key) {
-            list.push((key, Arc::new(state())));
+        if room(&list) {
+            list.push((key, state));
         }
     }
 

@@ -5,13 +5,13 @@
 //! offset look-at points and rolls. The sets must be bit-identical.
 
 mod common;
-use common::shell_keys;
+use common::{push_random_close, shell_keys};
 use objview_geom::cloud::{cloud_count, sample_surface, DEFAULT_CLOUD_SEED};
 use objview_geom::Pose;
 use objview_render::{Camera, Intrinsics};
 use objview_views::ViewSet;
 use objview_voxel::{InverseCaster, VoxelSet, DEFAULT_RESOLUTION};
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 /// The first `n` tammes-128 views at radius 3, then random cameras at radius 1.2–3 with a
@@ -19,20 +19,7 @@ use rand_chacha::ChaCha8Rng;
 fn cameras(n_tammes: usize, n_random: usize, seed: u64) -> Vec<Camera> {
     let mut poses: Vec<Pose> =
         ViewSet::resolve("tammes-128").unwrap().poses(3.0).into_iter().take(n_tammes).collect();
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    while poses.len() < n_tammes + n_random {
-        let v: [f64; 3] = std::array::from_fn(|_| rng.gen_range(-1.0..1.0));
-        let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-        if !(0.1..=1.0).contains(&n) {
-            continue;
-        }
-        let rad = rng.gen_range(1.2..3.0);
-        poses.push(Pose {
-            center: std::array::from_fn(|k| rad * v[k] / n),
-            look_at: std::array::from_fn(|_| rng.gen_range(-0.3..0.3)),
-            roll: rng.gen_range(-3.2..3.2),
-        });
-    }
+    push_random_close(&mut poses, &mut ChaCha8Rng::seed_from_u64(seed), n_tammes + n_random);
     poses.into_iter().map(|p| Camera::new(p, Intrinsics::default())).collect()
 }
 

@@ -7,7 +7,7 @@
 //! pruning gives up); `Visibility::union_all` equal on one and two threads.
 
 mod common;
-use common::shell_keys;
+use common::{push_random_close, shell_keys};
 use objview_geom::cloud::{cloud_count, sample_surface, DEFAULT_CLOUD_SEED};
 use objview_geom::Pose;
 use objview_render::{Camera, Intrinsics};
@@ -29,20 +29,7 @@ fn cameras(n: usize, n_random: usize, seed: u64) -> Vec<Camera> {
             poses.push(Pose::from_direction(d, 2.0));
         }
     }
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    while poses.len() < n + 6 + n_random {
-        let v: [f64; 3] = std::array::from_fn(|_| rng.gen_range(-1.0..1.0));
-        let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-        if !(0.1..=1.0).contains(&len) {
-            continue;
-        }
-        let rad = rng.gen_range(1.2..3.0);
-        poses.push(Pose {
-            center: std::array::from_fn(|k| rad * v[k] / len),
-            look_at: std::array::from_fn(|_| rng.gen_range(-0.3..0.3)),
-            roll: rng.gen_range(-3.2..3.2),
-        });
-    }
+    push_random_close(&mut poses, &mut ChaCha8Rng::seed_from_u64(seed), n + 6 + n_random);
     poses.push(Pose { center: [0.05, 0.02, 0.01], look_at: [1.0, 0.3, 0.2], roll: 0.0 });
     poses.push(Pose { center: [0.3, -0.6, 0.2], look_at: [0.0, 0.0, 0.0], roll: 0.4 });
     // Every fourth camera gets an image whose size is no multiple of the mask's 8-pixel tiles,

@@ -42,8 +42,9 @@ pub struct Args {
     /// `unit` (raw assets) or `none` (already normalized, checked), as `objview run`.
     #[arg(long, default_value = "unit")]
     pub normalize: Normalization,
-    /// Prepared scenes (mesh, ground truth, observable reference, indexes) kept in memory; the
-    /// least recently used is dropped first.
+    /// Prepared scenes (mesh, ground truth, observable reference, indexes, and the state after
+    /// the start view that later creates copy) kept in memory; the least recently used is
+    /// dropped first.
     #[arg(long, default_value_t = objview_server::pool::DEFAULT_SCENE_CACHE)]
     pub scene_cache: usize,
     /// Open connections at most (lowered to fit the descriptor limit). Beyond it a new

@@ -10,6 +10,7 @@
 
 use std::collections::BTreeMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -80,7 +81,9 @@ struct StartState {
     fused: FusedCloud,
     gt: Coverage,
     reference: Coverage,
-    gt_near: Targets,
+    /// `None` when the start view computed no CD (no checkpoint on it): the scene's fresh
+    /// set is then the same, and is not kept twice.
+    gt_near: Option<Targets>,
     slot_gt_d2: Vec<f64>,
     cd_seen: u32,
     cd_now: Option<f64>,
@@ -94,28 +97,28 @@ struct StartState {
 
 /// The start states of a scene's episodes, by [`StartKey`]: every episode on a scene with the
 /// same settings and start pose takes the same start view, so the first one's state after it
-/// is copied instead of rendered, fused and scored again (the same state, bit for bit; only
-/// the start step's timings differ). At most [`MAX_START_STATES`] starts are kept (the first
-/// ones seen; ~25 MB each on a 100k-triangle object with a 300k-point ground truth: the
-/// coverage and distance state of every target point, the fused cloud, the depth frame). A clone of a [`Scene`] starts empty, so
-/// a changed copy never reuses a state of the original.
+/// can be copied instead of rendered, fused and scored again (the same state, bit for bit; only
+/// the start step's timings differ). Off unless asked for ([`Scene::keep_start_states`]: the
+/// server and `bench` do): each kept start costs ~20 MB on a 100k-triangle object with a
+/// 300k-point ground truth (the coverage state of every target point, the fused cloud, the
+/// depth frame), and saves ~30 ms per episode. The first starts seen are kept. A clone of a
+/// [`Scene`] keeps the limit but none of the states, so a changed copy never reuses a state of
+/// the original.
 #[derive(Debug, Default)]
-pub(crate) struct StartStates(std::sync::Mutex<Vec<(StartKey, Arc<StartState>)>>);
-
-/// How many start states a scene keeps: the first ones seen (an episode's state right after
-/// its start view, per settings and start pose, which later episodes copy instead of taking
-/// the start view again).
-pub const MAX_START_STATES: usize = 2;
+pub(crate) struct StartStates {
+    limit: std::sync::atomic::AtomicUsize,
+    list: std::sync::Mutex<Vec<(StartKey, Arc<StartState>)>>,
+}
 
 impl Clone for StartStates {
     fn clone(&self) -> Self {
-        StartStates::default()
+        StartStates { limit: self.limit.load(Ordering::Relaxed).into(), list: Default::default() }
     }
 }
 
 impl StartStates {
     fn get(&self, key: &StartKey) -> Option<Arc<StartState>> {
-        let list = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        let list = self.list.lock().unwrap_or_else(|e| e.into_inner());
         list.iter().find(|(k, _)| k == key).map(|(_, s)| s.clone())
     }
 
@@ -123,13 +126,13 @@ impl StartStates {
     /// outside the lock: concurrent starts of the scene do not wait for it).
     fn remember(&self, key: StartKey, state: impl FnOnce() -> StartState) {
         let room = |list: &Vec<(StartKey, Arc<StartState>)>| {
-            list.len() < MAX_START_STATES && !list.iter().any(|(k, _)| *k == key)
+            list.len() < self.limit.load(Ordering::Relaxed) && !list.iter().any(|(k, _)| *k == key)
         };
-        if !room(&self.0.lock().unwrap_or_else(|e| e.into_inner())) {
+        if !room(&self.list.lock().unwrap_or_else(|e| e.into_inner())) {
             return;
         }
         let state = Arc::new(state());
-        let mut list = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        let mut list = self.list.lock().unwrap_or_else(|e| e.into_inner());
         if room(&list) {
             list.push((key, state));
         }
@@ -138,7 +141,7 @@ impl StartStates {
     /// How many start states are kept.
     #[cfg(test)]
     pub(crate) fn len(&self) -> usize {
-        self.0.lock().unwrap_or_else(|e| e.into_inner()).len()
+        self.list.lock().unwrap_or_else(|e| e.into_inner()).len()
     }
 }
 
@@ -171,6 +174,24 @@ impl Scene {
         };
         let _ = self.targets.set(Arc::new(fresh.clone()));
         Ok(fresh)
+    }
+
+    /// The ground truth's distance set of a new episode (what [`Scene::fresh_targets`] gives,
+    /// without copying the coverage sets).
+    fn fresh_gt_near(&self, taus: &[f64]) -> Result<Targets, EpisodeError> {
+        match self.targets.get() {
+            Some(t) if t.taus == taus => Ok(t.gt_near.clone()),
+            _ => Ok(self.fresh_targets(taus)?.gt_near),
+        }
+    }
+
+    /// Keeps the state after the start view of up to `n` starts (settings and start pose) of
+    /// this scene's episodes, which later episodes with the same start copy instead of taking
+    /// the start view again (see `StartStates` in the source: the same results bit for bit,
+    /// ~20 MB per start on a 100k-triangle object). 0 (the default) keeps none; lowering the
+    /// limit keeps the states already kept.
+    pub fn keep_start_states(&self, n: usize) {
+        self.starts.limit.store(n, Ordering::Relaxed);
     }
 
     /// The observable reference's exact-distance index (points in the order of the NSC
@@ -319,6 +340,10 @@ impl Episode {
                 path_cost,
                 frame,
             } = (*state).clone();
+            let gt_near = match gt_near {
+                Some(t) => t,
+                None => scene.fresh_gt_near(&settings.taus)?,
+            };
             if settings.record_timings {
                 // The start step's engine time is the copy's (stage "rest").
                 let t = started.elapsed().as_secs_f64();
@@ -408,7 +433,7 @@ impl Episode {
             fused: self.fused.clone(),
             gt: self.gt.clone(),
             reference: self.reference.clone(),
-            gt_near: self.gt_near.clone(),
+            gt_near: (self.cd_seen != 0).then(|| self.gt_near.clone()),
             slot_gt_d2: self.slot_gt_d2.clone(),
             cd_seen: self.cd_seen,
             cd_now: self.cd_now,
@@ -819,7 +844,7 @@ mod start_state_tests {
     /// A unit sphere in `whole` (its start states start empty).
     fn sphere() -> Arc<Scene> {
         static SPHERE: std::sync::OnceLock<Scene> = std::sync::OnceLock::new();
-        // A clone: the same content, no start states.
+        // A clone: the same content, no start states (and none kept: the built scene's limit).
         Arc::new(SPHERE.get_or_init(build_sphere).clone())
     }
 
@@ -849,7 +874,12 @@ mod start_state_tests {
         let s = EpisodeSettings { record_timings: false, checkpoint_ks: vec![2, 3], ..Default::default() };
         let a = objview_views::start_pose(3.0);
         let b = Pose::from_direction([1.0, -2.0, 0.5], 3.0);
+        // Off by default.
+        let off = sphere();
+        run(&off, &s, Budget::Fixed(3), a);
+        assert_eq!(off.starts.len(), 0);
         let scene = sphere();
+        scene.keep_start_states(2);
         let first = run(&scene, &s, Budget::Fixed(3), a);
         assert_eq!(scene.starts.len(), 1);
         // The same start again (a copy), with another budget (which cannot change the start
@@ -864,6 +894,7 @@ mod start_state_tests {
         assert_eq!(scene.starts.len(), 1);
         let cloned = Arc::new((*scene).clone());
         assert_eq!(cloned.starts.len(), 0);
+        assert_eq!(cloned.starts.limit.load(Ordering::Relaxed), 2);
         // Another start pose, other settings, a K = 0 checkpoint on the start view: each its
         // own start state, equal to a fresh start's episode.
         let other = EpisodeSettings { taus: vec![0.01, 0.05], ..s.clone() };
@@ -876,7 +907,7 @@ mod start_state_tests {
             assert_eq!(run(&scene, settings, budget, start), got);
         }
         // Full after the K = 0 start (the other two were not kept, and were still right).
-        assert_eq!(scene.starts.len(), MAX_START_STATES);
+        assert_eq!(scene.starts.len(), 2);
         // After a K = 0 start, an episode without one does not inherit its checkpoint.
         assert!(!run(&scene, &s, Budget::Fixed(2), a).contains("\"K=0\""));
         assert!(run(&scene, &s, Budget::Fixed(0), a).contains("\"K=0\""));
@@ -890,6 +921,7 @@ mod start_state_tests {
     fn a_copied_start_records_the_copy_as_its_engine_time() {
         let s = EpisodeSettings { record_timings: true, ..Default::default() };
         let scene = sphere();
+        scene.keep_start_states(1);
         let start = objview_views::start_pose(3.0);
         let mut ep = Vec::new();
         for _ in 0..2 {

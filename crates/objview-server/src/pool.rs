@@ -245,6 +245,9 @@ impl SceneCache {
         // The target sets' spatial indexes, built once here rather than by the first episode
         // (episodes use the default τ list; another list builds its own on first use).
         scene.fresh_targets(&self.settings.taus).map_err(|e| format!("{}: {e}", obj.uid))?;
+        // Every episode here has the server's settings and start pose: the first one's state
+        // after its start view is kept and copied by the later creates.
+        scene.keep_start_states(1);
         let scene = Arc::new(scene);
         self.stats.builds.fetch_add(1, Ordering::Relaxed);
         *slot = Some(scene.clone());

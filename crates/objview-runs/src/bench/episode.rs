@@ -239,6 +239,8 @@ pub fn bench_episode(
         &episode,
         None,
     )?);
+    // As the server's scenes: episodes after the first copy the start view's state.
+    scene.keep_start_states(1);
     let reference_seconds = t.elapsed().as_secs_f64();
     let candidates = Arc::new(ViewSet::resolve("tammes-360")?.poses(episode.view_radius));
     // A spread order: every 37th candidate (37 is coprime with 360).

@@ -74,25 +74,79 @@ struct StartKey {
     intrinsics: Intrinsics,
 }
 
-/// An episode's state right after [`Episode::start`] took and scored its start view: every
-/// field the start view wrote.
+/// What an episode's views write: its state after the start view is what later episodes with
+/// the same start copy ([`StartStates`]).
 #[derive(Debug, Clone)]
-struct StartState {
+struct Progress {
     fused: FusedCloud,
+    /// SC's coverage.
     gt: Coverage,
+    /// NSC's coverage.
     reference: Coverage,
-    /// `None` when the start view computed no CD (no checkpoint on it): the scene's fresh
-    /// set is then the same, and is not kept twice.
+    /// Exact GT → fused distances (CD), as of fused epoch `cd_seen`; made (a copy of the
+    /// scene's fresh set) by the first CD, so that an episode and a kept start state hold it
+    /// only once it differs from the scene's.
     gt_near: Option<Targets>,
+    /// Per fused slot: d² to the nearest ground-truth point (fused → GT half of CD), as of
+    /// fused epoch `cd_seen`.
     slot_gt_d2: Vec<f64>,
     cd_seen: u32,
+    /// CD of the latest view, once computed (a checkpoint at that view).
     cd_now: Option<f64>,
     ms: Vec<Stabilization>,
     history: Vec<Pose>,
     steps: Vec<Step>,
     checkpoints: BTreeMap<CheckpointKey, Checkpoint>,
     path_cost: f64,
+    /// The latest view (its depth is the observation; RGB is rendered from its triangle ids).
     frame: Frame,
+}
+
+impl Progress {
+    /// An episode's state before its start view: nothing fused, the scene's fresh target sets.
+    fn nothing_seen(
+        scene: &Scene,
+        settings: &EpisodeSettings,
+        start_pose: Pose,
+    ) -> Result<Progress, EpisodeError> {
+        // The coverage sets are copied now; the distance set only by the first CD, when the
+        // scene holds it (sets for another τ list than the scene's are built for this episode
+        // alone, and kept).
+        let taus = &settings.taus;
+        let (gt, reference, gt_near) = match scene.targets.get() {
+            Some(t) if t.taus == *taus => (t.gt.clone(), t.reference.clone(), None),
+            _ => {
+                let f = scene.fresh_targets(taus)?;
+                let shared = scene.targets.get().is_some_and(|t| t.taus == *taus);
+                (f.gt, f.reference, (!shared).then_some(f.gt_near))
+            }
+        };
+        let h = settings.fusion_voxel;
+        // The fused cloud's fine keys lie in its domain's blocks (any outside are still counted).
+        let (fine_lo, fine_hi) = scene.domain.key_box();
+        let ms = settings
+            .ms_deltas
+            .iter()
+            .map(|&d| {
+                Stabilization::with_box(d, h, settings.ms_growth, settings.ms_stable_steps, fine_lo, fine_hi)
+            })
+            .collect();
+        Ok(Progress {
+            fused: FusedCloud::new(scene.domain.clone()),
+            gt,
+            reference,
+            gt_near,
+            slot_gt_d2: Vec::new(),
+            cd_seen: 0,
+            cd_now: None,
+            ms,
+            history: Vec::new(),
+            steps: Vec::new(),
+            checkpoints: BTreeMap::new(),
+            path_cost: 0.0,
+            frame: Frame::empty(Camera::new(start_pose, scene.intrinsics)),
+        })
+    }
 }
 
 /// The start states of a scene's episodes, by [`StartKey`]: every episode on a scene with the
@@ -107,7 +161,7 @@ struct StartState {
 #[derive(Debug, Default)]
 pub(crate) struct StartStates {
     limit: std::sync::atomic::AtomicUsize,
-    list: std::sync::Mutex<Vec<(StartKey, Arc<StartState>)>>,
+    list: std::sync::Mutex<Vec<(StartKey, Arc<Progress>)>>,
 }
 
 impl Clone for StartStates {
@@ -117,15 +171,15 @@ impl Clone for StartStates {
 }
 
 impl StartStates {
-    fn get(&self, key: &StartKey) -> Option<Arc<StartState>> {
+    fn get(&self, key: &StartKey) -> Option<Arc<Progress>> {
         let list = self.list.lock().unwrap_or_else(|e| e.into_inner());
         list.iter().find(|(k, _)| k == key).map(|(_, s)| s.clone())
     }
 
     /// Keeps `state()` for `key` if there is room and none is kept yet (the copy is made
     /// outside the lock: concurrent starts of the scene do not wait for it).
-    fn remember(&self, key: StartKey, state: impl FnOnce() -> StartState) {
-        let room = |list: &Vec<(StartKey, Arc<StartState>)>| {
+    fn remember(&self, key: StartKey, state: impl FnOnce() -> Progress) {
+        let room = |list: &Vec<(StartKey, Arc<Progress>)>| {
             list.len() < self.limit.load(Ordering::Relaxed) && !list.iter().any(|(k, _)| *k == key)
         };
         if !room(&self.list.lock().unwrap_or_else(|e| e.into_inner())) {
@@ -176,12 +230,12 @@ impl Scene {
         Ok(fresh)
     }
 
-    /// The ground truth's distance set of a new episode (what [`Scene::fresh_targets`] gives,
-    /// without copying the coverage sets).
-    fn fresh_gt_near(&self, taus: &[f64]) -> Result<Targets, EpisodeError> {
+    /// `f` of the scene's fresh target sets for `taus` (built on first use, as
+    /// [`Scene::fresh_targets`]), without copying the parts `f` does not take.
+    fn with_fresh<T>(&self, taus: &[f64], f: impl FnOnce(&FreshTargets) -> T) -> Result<T, EpisodeError> {
         match self.targets.get() {
-            Some(t) if t.taus == taus => Ok(t.gt_near.clone()),
-            _ => Ok(self.fresh_targets(taus)?.gt_near),
+            Some(t) if t.taus == taus => Ok(f(t)),
+            _ => Ok(f(&self.fresh_targets(taus)?)),
         }
     }
 
@@ -257,29 +311,11 @@ pub struct Episode {
     budget: Budget,
     seed: u64,
     start_pose: Pose,
-    fused: FusedCloud,
-    /// SC's coverage.
-    gt: Coverage,
-    /// NSC's coverage.
-    reference: Coverage,
-    /// Exact GT → fused distances (CD), as of fused epoch `cd_seen`.
-    gt_near: Targets,
-    /// Per fused slot: d² to the nearest ground-truth point (fused → GT half of CD), as of
-    /// fused epoch `cd_seen`.
-    slot_gt_d2: Vec<f64>,
-    cd_seen: u32,
-    /// CD of the latest view, once computed (a checkpoint at that view).
-    cd_now: Option<f64>,
-    ms: Vec<Stabilization>,
-    history: Vec<Pose>,
-    steps: Vec<Step>,
-    checkpoints: BTreeMap<CheckpointKey, Checkpoint>,
+    /// What the views so far wrote.
+    now: Progress,
     ks: Vec<usize>,
     runtime: f64,
-    path_cost: f64,
     terminal: Option<Terminal>,
-    /// The latest view (its depth is the observation; RGB is rendered from its triangle ids).
-    frame: Frame,
     started: Instant,
 }
 
@@ -324,87 +360,16 @@ impl Episode {
             pose: start_pose.to_array().map(f64::to_bits),
             intrinsics: scene.intrinsics,
         };
-        if let Some(state) = scene.starts.get(&key) {
-            let StartState {
-                fused,
-                gt,
-                reference,
-                gt_near,
-                slot_gt_d2,
-                cd_seen,
-                cd_now,
-                ms,
-                history,
-                mut steps,
-                checkpoints,
-                path_cost,
-                frame,
-            } = (*state).clone();
-            let gt_near = match gt_near {
-                Some(t) => t,
-                None => scene.fresh_gt_near(&settings.taus)?,
-            };
-            if settings.record_timings {
-                // The start step's engine time is the copy's (stage "rest").
-                let t = started.elapsed().as_secs_f64();
-                steps[0].engine_seconds = t;
-                steps[0].stage_seconds = [0.0, 0.0, 0.0, t];
-            }
-            return Ok(Episode {
-                fused,
-                gt,
-                reference,
-                gt_near,
-                slot_gt_d2,
-                cd_seen,
-                cd_now,
-                ms,
-                history,
-                steps,
-                checkpoints,
-                ks,
-                runtime: 0.0,
-                path_cost,
-                terminal: None,
-                frame,
-                started,
-                scene,
-                settings,
-                method,
-                budget,
-                seed,
-                start_pose,
-            });
-        }
-        let fresh = scene.fresh_targets(&settings.taus)?;
-        let h = settings.fusion_voxel;
-        // The fused cloud's fine keys lie in its domain's blocks (any outside are still counted).
-        let (fine_lo, fine_hi) = scene.domain.key_box();
-        let ms = settings
-            .ms_deltas
-            .iter()
-            .map(|&d| {
-                Stabilization::with_box(d, h, settings.ms_growth, settings.ms_stable_steps, fine_lo, fine_hi)
-            })
-            .collect();
-        let cam = Camera::new(start_pose, scene.intrinsics);
+        let copied = scene.starts.get(&key);
+        let now = match &copied {
+            Some(state) => (**state).clone(),
+            None => Progress::nothing_seen(&scene, &settings, start_pose)?,
+        };
         let mut ep = Episode {
-            fused: FusedCloud::new(scene.domain.clone()),
-            gt: fresh.gt,
-            reference: fresh.reference,
-            gt_near: fresh.gt_near,
-            slot_gt_d2: Vec::new(),
-            cd_seen: 0,
-            cd_now: None,
-            ms,
-            history: Vec::new(),
-            steps: Vec::new(),
-            checkpoints: BTreeMap::new(),
+            now,
             ks,
             runtime: 0.0,
-            path_cost: 0.0,
             terminal: None,
-            frame: Frame::empty(cam),
             started,
             scene,
             settings,
@@ -413,8 +378,17 @@ impl Episode {
             seed,
             start_pose,
         };
+        if copied.is_some() {
+            if ep.settings.record_timings {
+                // The start step's engine time is the copy's (stage "rest").
+                let t = ep.started.elapsed().as_secs_f64();
+                ep.now.steps[0].engine_seconds = t;
+                ep.now.steps[0].stage_seconds = [0.0, 0.0, 0.0, t];
+            }
+            return Ok(ep);
+        }
         ep.observe(start_pose, 0.0);
-        if ep.fused.is_empty() {
+        if ep.now.fused.is_empty() {
             // CD (and every later step's, until something is seen) would be infinite.
             return Err(EpisodeError::Setup(format!(
                 "the start view from {:?} sees nothing of object {}: its metrics are undefined \
@@ -423,27 +397,8 @@ impl Episode {
                 ep.scene.uid
             )));
         }
-        ep.scene.starts.remember(key, || ep.start_state());
+        ep.scene.starts.remember(key, || ep.now.clone());
         Ok(ep)
-    }
-
-    /// A copy of what the start view wrote (see [`StartStates`]).
-    fn start_state(&self) -> StartState {
-        StartState {
-            fused: self.fused.clone(),
-            gt: self.gt.clone(),
-            reference: self.reference.clone(),
-            gt_near: (self.cd_seen != 0).then(|| self.gt_near.clone()),
-            slot_gt_d2: self.slot_gt_d2.clone(),
-            cd_seen: self.cd_seen,
-            cd_now: self.cd_now,
-            ms: self.ms.clone(),
-            history: self.history.clone(),
-            steps: self.steps.clone(),
-            checkpoints: self.checkpoints.clone(),
-            path_cost: self.path_cost,
-            frame: self.frame.clone(),
-        }
     }
 
     /// The latest observation (what the planner sees).
@@ -451,12 +406,12 @@ impl Episode {
         let rgb = self
             .settings
             .render_rgb
-            .then(|| Arc::new(objview_render::rgb::render_rgb(&self.scene.mesh, &self.frame)));
+            .then(|| Arc::new(objview_render::rgb::render_rgb(&self.scene.mesh, &self.now.frame)));
         Observation {
-            step: self.steps.len() - 1,
-            pose: *self.history.last().unwrap_or(&self.start_pose),
+            step: self.now.steps.len() - 1,
+            pose: *self.now.history.last().unwrap_or(&self.start_pose),
             intrinsics: self.scene.intrinsics,
-            depth: Arc::new(self.frame.depth.clone()),
+            depth: Arc::new(self.now.frame.depth.clone()),
             rgb,
         }
     }
@@ -464,7 +419,7 @@ impl Episode {
     /// The latest step's record (metrics after the latest view). Ground truth: not for
     /// planners — the server shows it only for public splits.
     pub fn last_step(&self) -> Option<&Step> {
-        self.steps.last()
+        self.now.steps.last()
     }
 
     /// Whether the episode has ended.
@@ -474,7 +429,7 @@ impl Episode {
 
     /// Poses executed so far, start first.
     pub fn history(&self) -> &[Pose] {
-        &self.history
+        &self.now.history
     }
 
     /// The scene.
@@ -488,7 +443,7 @@ impl Episode {
         let j = (0..self.settings.taus.len())
             .min_by(|&a, &b| self.settings.taus[a].total_cmp(&self.settings.taus[b]))
             .unwrap_or(0);
-        self.reference.covered(j)
+        self.now.reference.covered(j)
     }
 
     /// The planner context of this episode (`oracle`: with ground-truth access, whose reference
@@ -502,7 +457,7 @@ impl Episode {
         let oracle = match oracle {
             true => Some(OracleAccess {
                 mesh: self.scene.mesh.clone(),
-                reference: Arc::new(self.reference.points().to_vec()),
+                reference: Arc::new(self.now.reference.points().to_vec()),
                 reference_targets: self.scene.reference_targets()?,
             }),
             false => None,
@@ -562,13 +517,13 @@ impl Episode {
                     (self.method.mode, self.budget)
                 {
                     // A finite plan that asks for a view beyond its budget: the move is refused.
-                    if self.history.len() > k {
+                    if self.now.history.len() > k {
                         self.end(
                             TerminalSource::Benchmark,
                             "budget_reached",
                             format!(
                                 "the plan asked for view {} beyond its budget K = {k}",
-                                self.history.len()
+                                self.now.history.len()
                             ),
                         );
                         return;
@@ -594,7 +549,7 @@ impl Episode {
         if self.terminal.is_some() {
             return;
         }
-        let views = self.history.len();
+        let views = self.now.history.len();
         if views >= self.settings.cap {
             self.end(
                 TerminalSource::Benchmark,
@@ -614,12 +569,12 @@ impl Episode {
     }
 
     fn all_checkpoints_reached(&self) -> bool {
-        self.ks.iter().all(|&k| self.checkpoints.contains_key(&CheckpointKey::Budget(k)))
+        self.ks.iter().all(|&k| self.now.checkpoints.contains_key(&CheckpointKey::Budget(k)))
             && self
                 .settings
                 .ms_deltas
                 .iter()
-                .all(|&d| self.checkpoints.contains_key(&CheckpointKey::Stabilized(d)))
+                .all(|&d| self.now.checkpoints.contains_key(&CheckpointKey::Stabilized(d)))
     }
 
     /// Renders, fuses and scores the view from `pose` (the scoring: [`crate::metrics`]); CD
@@ -628,29 +583,29 @@ impl Episode {
         let t0 = Instant::now();
         let cam = Camera::new(pose, self.scene.intrinsics);
         let (delta, t_render, t_fuse, t_cov) = STEP_SCRATCH.with(|s| {
-            s.renderer.render_into(&self.scene.mesh, &cam, &mut self.frame);
+            s.renderer.render_into(&self.scene.mesh, &cam, &mut self.now.frame);
             let t_render = t0.elapsed().as_secs_f64();
-            self.frame.observed_points_into(&mut s.points);
-            let delta = self.fused.insert(&s.points);
+            self.now.frame.observed_points_into(&mut s.points);
+            let delta = self.now.fused.insert(&s.points);
             let t_fuse = t0.elapsed().as_secs_f64();
-            s.groups.rebuild_latest(&self.fused);
-            metrics::update_coverage(&mut self.gt, &mut self.reference, &self.fused, &s.groups);
+            s.groups.rebuild_latest(&self.now.fused);
+            metrics::update_coverage(&mut self.now.gt, &mut self.now.reference, &self.now.fused, &s.groups);
             (delta, t_render, t_fuse, t0.elapsed().as_secs_f64())
         });
-        metrics::add_new_voxels(&mut self.ms, &self.fused, delta.new_slots);
-        self.path_cost = metrics::path_cost(self.path_cost, self.history.last(), &pose);
-        self.history.push(pose);
-        self.cd_now = None;
-        let step = self.history.len() - 1;
+        metrics::add_new_voxels(&mut self.now.ms, &self.now.fused, delta.new_slots);
+        self.now.path_cost = metrics::path_cost(self.now.path_cost, self.now.history.last(), &pose);
+        self.now.history.push(pose);
+        self.now.cd_now = None;
+        let step = self.now.history.len() - 1;
         let taus = &self.settings.taus;
         let scores = StepMetrics {
-            views: metrics::views(&self.history),
-            sc: metrics::sc(&self.gt, taus),
-            nsc: metrics::nsc(&self.reference, taus),
-            path_cost: self.path_cost,
+            views: metrics::views(&self.now.history),
+            sc: metrics::sc(&self.now.gt, taus),
+            nsc: metrics::nsc(&self.now.reference, taus),
+            path_cost: self.now.path_cost,
             runtime: self.runtime,
         };
-        let (ms_voxels, mut keys) = metrics::stabilization_step(&mut self.ms, step);
+        let (ms_voxels, mut keys) = metrics::stabilization_step(&mut self.now.ms, step);
         let planner_views = step;
         if self.ks.contains(&planner_views) {
             keys.push(CheckpointKey::Budget(planner_views));
@@ -658,7 +613,7 @@ impl Episode {
         if !keys.is_empty() {
             let cd = self.cd();
             for key in keys {
-                self.checkpoints.insert(key, Checkpoint { step, metrics: scores.with_cd(cd) });
+                self.now.checkpoints.insert(key, Checkpoint { step, metrics: scores.with_cd(cd) });
             }
         }
         let (engine_seconds, stage_seconds) = if self.settings.record_timings {
@@ -667,11 +622,11 @@ impl Episode {
         } else {
             (0.0, [0.0; 4])
         };
-        self.steps.push(Step {
+        self.now.steps.push(Step {
             step,
             pose: pose.to_array(),
             metrics: scores,
-            fused_points: self.fused.len(),
+            fused_points: self.now.fused.len(),
             ms_voxels,
             planner_seconds,
             engine_seconds,
@@ -681,11 +636,17 @@ impl Episode {
 
     /// CD of the latest view (computed once per view).
     fn cd(&mut self) -> f64 {
-        if let Some(cd) = self.cd_now {
+        if let Some(cd) = self.now.cd_now {
             return cd;
         }
-        let cd = metrics::chamfer(&mut self.gt_near, &mut self.slot_gt_d2, &self.fused, &mut self.cd_seen);
-        self.cd_now = Some(cd);
+        let (scene, taus) = (&self.scene, &self.settings.taus);
+        let now = &mut self.now;
+        let gt_near = now.gt_near.get_or_insert_with(|| {
+            // Left out at the start only when the scene holds the sets for this τ list: a copy.
+            scene.with_fresh(taus, |t| t.gt_near.clone()).expect("the scene's target sets for this τ list")
+        });
+        let cd = metrics::chamfer(gt_near, &mut now.slot_gt_d2, &now.fused, &mut now.cd_seen);
+        self.now.cd_now = Some(cd);
         cd
     }
 
@@ -696,8 +657,8 @@ impl Episode {
             self.end(TerminalSource::Exception, "interrupted", "the episode was not finished");
         }
         let cd = self.cd();
-        let last = self.steps.last().expect("the start view is always taken");
-        self.checkpoints.insert(
+        let last = self.now.steps.last().expect("the start view is always taken");
+        self.now.checkpoints.insert(
             CheckpointKey::Terminal,
             Checkpoint { step: last.step, metrics: last.metrics.with_cd(cd) },
         );
@@ -716,12 +677,12 @@ impl Episode {
             budget: self.budget,
             seed: self.seed,
             start_pose: self.start_pose.to_array(),
-            visited_poses: self.history.iter().map(|p| p.to_array()).collect(),
+            visited_poses: self.now.history.iter().map(|p| p.to_array()).collect(),
             terminal_source: t.source,
             terminal_reason: t.reason,
             terminal_detail: t.detail,
-            steps: self.steps,
-            checkpoints: self.checkpoints,
+            steps: self.now.steps,
+            checkpoints: self.now.checkpoints,
             reference: self.scene.reference.info.clone(),
             gt_points: self.scene.gt.len(),
             gt_source: self.scene.gt_source.clone(),
@@ -933,7 +894,7 @@ mod start_state_tests {
             };
             ep.push(Episode::start(scene.clone(), s.clone(), method, Budget::Auto, 0, start).unwrap());
         }
-        let (computed, copied) = (&ep[0].steps[0], &ep[1].steps[0]);
+        let (computed, copied) = (&ep[0].now.steps[0], &ep[1].now.steps[0]);
         assert!(computed.stage_seconds[0] > 0.0 && computed.stage_seconds[1] > 0.0);
         assert_eq!(copied.stage_seconds[..3], [0.0; 3]);
         assert!(copied.engine_seconds > 0.0 && copied.stage_seconds[3] == copied.engine_seconds);

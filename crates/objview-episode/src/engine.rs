@@ -113,12 +113,12 @@ impl Progress {
         // scene holds it (sets for another τ list than the scene's are built for this episode
         // alone, and kept).
         let taus = &settings.taus;
-        let (gt, reference, gt_near) = match scene.targets.get() {
-            Some(t) if t.taus == *taus => (t.gt.clone(), t.reference.clone(), None),
-            _ => {
+        let (gt, reference, gt_near) = match scene.shared_targets(taus) {
+            Some(t) => (t.gt.clone(), t.reference.clone(), None),
+            None => {
                 let f = scene.fresh_targets(taus)?;
-                let shared = scene.targets.get().is_some_and(|t| t.taus == *taus);
-                (f.gt, f.reference, (!shared).then_some(f.gt_near))
+                let gt_near = scene.shared_targets(taus).is_none().then_some(f.gt_near);
+                (f.gt, f.reference, gt_near)
             }
         };
         let h = settings.fusion_voxel;
@@ -213,10 +213,8 @@ impl Scene {
     /// The target sets of a new episode scoring at `taus`. Their indexes are built once per
     /// scene (for the first τ list; episodes use one τ list in practice) and shared.
     pub fn fresh_targets(&self, taus: &[f64]) -> Result<FreshTargets, EpisodeError> {
-        if let Some(t) = self.targets.get() {
-            if t.taus == taus {
-                return Ok((**t).clone());
-            }
+        if let Some(t) = self.shared_targets(taus) {
+            return Ok(t.clone());
         }
         let fresh = FreshTargets {
             taus: taus.to_vec(),
@@ -230,13 +228,10 @@ impl Scene {
         Ok(fresh)
     }
 
-    /// `f` of the scene's fresh target sets for `taus` (built on first use, as
-    /// [`Scene::fresh_targets`]), without copying the parts `f` does not take.
-    fn with_fresh<T>(&self, taus: &[f64], f: impl FnOnce(&FreshTargets) -> T) -> Result<T, EpisodeError> {
-        match self.targets.get() {
-            Some(t) if t.taus == taus => Ok(f(t)),
-            _ => Ok(f(&self.fresh_targets(taus)?)),
-        }
+    /// The fresh target sets the scene holds, if they are for `taus` (the τ list they were
+    /// first built for).
+    fn shared_targets(&self, taus: &[f64]) -> Option<&FreshTargets> {
+        self.targets.get().map(|t| &**t).filter(|t| t.taus == taus)
     }
 
     /// Keeps the state after the start view of up to `n` starts (settings and start pose) of
@@ -642,8 +637,10 @@ impl Episode {
         let (scene, taus) = (&self.scene, &self.settings.taus);
         let now = &mut self.now;
         let gt_near = now.gt_near.get_or_insert_with(|| {
-            // Left out at the start only when the scene holds the sets for this τ list: a copy.
-            scene.with_fresh(taus, |t| t.gt_near.clone()).expect("the scene's target sets for this τ list")
+            let shared = scene.shared_targets(taus);
+            // Left out at the start only when the scene held the sets for this τ list, which it
+            // keeps.
+            shared.expect("the scene's target sets for the episode's τ list").gt_near.clone()
         });
         let cd = metrics::chamfer(gt_near, &mut now.slot_gt_d2, &now.fused, &mut now.cd_seen);
         self.now.cd_now = Some(cd);
@@ -851,7 +848,7 @@ mod start_state_tests {
             let fresh = run(&sphere(), &s, budget, a);
             assert_eq!(copied, fresh, "{budget:?}");
         }
-        assert_eq!(copied_again(&scene, &s, a), first);
+        assert_eq!(run(&scene, &s, Budget::Fixed(3), a), first);
         assert_eq!(scene.starts.len(), 1);
         let cloned = Arc::new((*scene).clone());
         assert_eq!(cloned.starts.len(), 0);
@@ -872,10 +869,6 @@ mod start_state_tests {
         // After a K = 0 start, an episode without one does not inherit its checkpoint.
         assert!(!run(&scene, &s, Budget::Fixed(2), a).contains("\"K=0\""));
         assert!(run(&scene, &s, Budget::Fixed(0), a).contains("\"K=0\""));
-    }
-
-    fn copied_again(scene: &Arc<Scene>, s: &EpisodeSettings, start: Pose) -> String {
-        run(scene, s, Budget::Fixed(3), start)
     }
 
     #[test]

@@ -957,8 +957,8 @@ mod tests {
         let tp = vec![[0.0, 0.0, 0.0], [0.015, 0.0, 0.0], [0.5, 0.0, 0.0]];
         let mut t = Targets::new(domain.clone(), &tp, f64::INFINITY).unwrap();
         let mut fused = FusedCloud::new(domain);
-        let d = fused.insert(&[[0.001, 0.0, 0.0]]);
-        t.update(&fused, &d.changed);
+        fused.insert(&[[0.001, 0.0, 0.0]]);
+        t.update(&fused, &fused.latest_changed());
         // Distances 0.001, 0.014, 0.499 (points sorted by voxel: same order here).
         let f = t.fractions(&[0.01, 0.02, 0.03]);
         assert_eq!(f, vec![1.0 / 3.0, 2.0 / 3.0, 2.0 / 3.0]);

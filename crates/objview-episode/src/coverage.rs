@@ -615,8 +615,8 @@ mod tests {
             let mut cov = Coverage::new(domain.clone(), &tp, &taus).unwrap();
             assert_eq!(cov.len(), tp.len());
             for step in 0..10 {
-                let delta = fused.insert(&patch(&mut rng, 5000, 0.5));
-                cov.update(&fused, &ChangedBlocks::new(&fused, &delta.changed));
+                fused.insert(&patch(&mut rng, 5000, 0.5));
+                cov.update(&fused, &ChangedBlocks::new(&fused, &fused.latest_changed()));
                 let want = brute(cov.points(), &fused, &taus);
                 for (j, w) in want.iter().enumerate() {
                     assert_eq!(&cov.covered(j), w, "taus {taus:?} step {step} τ #{j}");
@@ -639,11 +639,11 @@ mod tests {
         let target = [0.0121, 0.0026, 0.0026];
         let mut cov = Coverage::new(domain.clone(), &[target], &[0.0102]).unwrap();
         let mut fused = FusedCloud::new(domain);
-        let d = fused.insert(&[[0.002, 0.0026, 0.0026]]);
-        cov.update(&fused, &ChangedBlocks::new(&fused, &d.changed));
+        fused.insert(&[[0.002, 0.0026, 0.0026]]);
+        cov.update(&fused, &ChangedBlocks::new(&fused, &fused.latest_changed()));
         assert_eq!(cov.counts(), &[1]);
-        let d = fused.insert(&[[0.0001, 0.0026, 0.0026]]);
-        cov.update(&fused, &ChangedBlocks::new(&fused, &d.changed));
+        fused.insert(&[[0.0001, 0.0026, 0.0026]]);
+        cov.update(&fused, &ChangedBlocks::new(&fused, &fused.latest_changed()));
         // Centroid (0.002 + 0.0001) / 2 = 0.00105: 0.01105 away.
         assert_eq!(cov.counts(), &[0]);
         assert_eq!(cov.retired(), 0);
@@ -678,8 +678,8 @@ mod tests {
                 let retired_with = |points: &[[f64; 3]]| {
                     let mut cov = Coverage::new(domain.clone(), &[p], &[0.01, 0.02]).unwrap();
                     let mut fused = FusedCloud::new(domain.clone());
-                    let d = fused.insert(points);
-                    cov.update(&fused, &ChangedBlocks::new(&fused, &d.changed));
+                    fused.insert(points);
+                    cov.update(&fused, &ChangedBlocks::new(&fused, &fused.latest_changed()));
                     assert_eq!(cov.counts(), &[1, 1], "axis {a}, voxel {k:?}");
                     cov.retired()
                 };
@@ -695,8 +695,8 @@ mod tests {
         let domain = Domain::covering(0.005, [-0.1; 3], [0.1; 3], 0.05);
         let mut cov = Coverage::new(domain.clone(), &[[0.0049, 0.0049, 0.0049]], &[0.01, 0.02]).unwrap();
         let mut fused = FusedCloud::new(domain);
-        let d = fused.insert(&[[0.0001, 0.0001, 0.0001]]);
-        cov.update(&fused, &ChangedBlocks::new(&fused, &d.changed));
+        fused.insert(&[[0.0001, 0.0001, 0.0001]]);
+        cov.update(&fused, &ChangedBlocks::new(&fused, &fused.latest_changed()));
         assert_eq!((cov.counts(), cov.retired()), (&[1usize, 1][..], 1));
         assert!(Coverage::new(Domain::covering(0.005, [0.0; 3], [0.1; 3], 0.0), &[[3.0, 0.0, 0.0]], &[0.01])
             .is_err());

@@ -137,19 +137,31 @@ impl FusedBlock {
         }
     }
 
-    /// The places in `slots` and `centroids` of the voxels the latest insertion that touched
-    /// the block changed (created or moved), in local-index order.
-    fn changed_places(&self) -> impl Iterator<Item = usize> + '_ {
-        self.changed_bits.iter().zip(&self.occupied).zip(&self.before).flat_map(|((&bits, &word), &base)| {
+    /// Calls `f(place)` with the place in `slots` and `centroids` of each voxel the latest
+    /// insertion that touched the block changed (created or moved), in local-index order.
+    #[inline]
+    fn for_each_changed_place(&self, mut f: impl FnMut(usize)) {
+        for ((&bits, &word), &base) in self.changed_bits.iter().zip(&self.occupied).zip(&self.before) {
             let mut bits = bits;
-            std::iter::from_fn(move || {
-                (bits != 0).then(|| {
-                    let b = bits.trailing_zeros();
-                    bits &= bits - 1;
-                    base as usize + ones_below(word, b)
-                })
-            })
-        })
+            while bits != 0 {
+                let b = bits.trailing_zeros();
+                bits &= bits - 1;
+                f(base as usize + ones_below(word, b));
+            }
+        }
+    }
+
+    /// How many voxels the latest insertion that touched the block changed.
+    #[inline]
+    pub fn changed_count(&self) -> usize {
+        self.changed_bits.iter().map(|w| w.count_ones() as usize).sum()
+    }
+
+    /// Calls `f(slot, position)` for each voxel the latest insertion that touched the block
+    /// changed (created or moved), in local-index order, from block-local memory.
+    #[inline]
+    pub fn for_each_change(&self, mut f: impl FnMut(u32, [f64; 3])) {
+        self.for_each_changed_place(|j| f(self.slots[j], self.centroids[j]));
     }
 
     /// Marks the voxels `fresh` (local indices, ascending, none occupied yet) occupied and
@@ -206,7 +218,7 @@ pub struct FusedCloud {
     pub supergrid: SuperGrid,
     epoch: u32,
     /// The blocks the latest insertion changed, as (domain index, allocation index), by domain
-    /// index: [`FusedCloud::latest_changes`].
+    /// index: [`FusedCloud::latest_blocks`].
     latest: Vec<(u32, u32)>,
 }
 
@@ -264,9 +276,7 @@ struct Accum {
 /// What one insertion changed.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct FusionDelta {
-    /// Slots created or moved by this insertion, by block and voxel.
-    pub changed: Vec<u32>,
-    /// How many of them are new.
+    /// Slots created by this insertion (those it moved: [`FusedCloud::latest_changed`]).
     pub new_slots: usize,
     /// Observed points outside the domain (dropped; never expected for points on the mesh).
     pub dropped: usize,
@@ -500,24 +510,27 @@ impl FusedCloud {
         by_domain.clear();
         by_domain.extend(touched.iter().map(|&t| (self.table_index(t), t)));
         by_domain.sort_unstable();
-        for &(_, t) in &by_domain {
-            let blk = &self.blocks[t as usize];
-            delta.changed.extend(blk.changed_places().map(|j| blk.slots[j]));
-        }
         self.latest = by_domain;
         s.at = at;
         s.order = order;
         delta
     }
 
-    /// Calls `f(block key, slots, positions)` for each block the latest insertion changed, by
-    /// domain index, with that block's changed slots and their positions by fine voxel — what
-    /// [`FusionDelta::changed`] lists, read from block-local memory.
-    pub fn latest_changes(&self, mut f: impl FnMut([i32; 3], &mut dyn Iterator<Item = (u32, [f64; 3])>)) {
-        for &(_, t) in &self.latest {
-            let blk = &self.blocks[t as usize];
-            f(blk.key, &mut blk.changed_places().map(|j| (blk.slots[j], blk.centroids[j])));
+    /// The blocks the latest insertion changed, by domain index (their changes:
+    /// [`FusedBlock::for_each_change`]).
+    pub fn latest_blocks(&self) -> impl Iterator<Item = &FusedBlock> + '_ {
+        self.latest.iter().map(|&(_, t)| &self.blocks[t as usize])
+    }
+
+    /// The slots the latest insertion created or moved, by block (domain index) and voxel —
+    /// the order of the spatial metric updates. Built on demand: the engine reads the changes
+    /// block by block ([`FusedCloud::latest_blocks`]) and never needs the list.
+    pub fn latest_changed(&self) -> Vec<u32> {
+        let mut v = Vec::new();
+        for blk in self.latest_blocks() {
+            blk.for_each_changed_place(|j| v.push(blk.slots[j]));
         }
+        v
     }
 
     /// The domain block index of allocated block `t`.
@@ -727,11 +740,11 @@ mod tests {
                 })
                 .collect();
             let mut f = FusedCloud::new(d.clone());
-            let delta = f.insert(&pts);
+            f.insert(&pts);
             let bits = |v: &[[f64; 3]]| -> Vec<[u64; 3]> { v.iter().map(|p| p.map(f64::to_bits)).collect() };
             // The same positions bit for bit, in the order of the insertion's changed slots
             // (block, then voxel).
-            let want: Vec<[f64; 3]> = delta.changed.iter().map(|&s| f.pos[s as usize]).collect();
+            let want: Vec<[f64; 3]> = f.latest_changed().iter().map(|&s| f.pos[s as usize]).collect();
             let got = frame_centroids(&d, &pts);
             assert_eq!(bits(&got), bits(&want), "{n} points");
             assert_eq!(got.len(), f.len());
@@ -763,12 +776,12 @@ mod tests {
         let mut f = FusedCloud::new(domain());
         // Two points in voxel (0,0,0), one in (1,0,0).
         let d = f.insert(&[[0.001, 0.001, 0.001], [0.003, 0.001, 0.001], [0.006, 0.001, 0.001]]);
-        assert_eq!(d.changed, vec![0, 1]); // voxel (0,0,0) then (1,0,0)
+        assert_eq!(f.latest_changed(), vec![0, 1]); // voxel (0,0,0) then (1,0,0)
         assert_eq!(d.new_slots, 2);
         assert!((f.pos[0][0] - 0.002).abs() < 1e-15);
         // Again: previous centroid counts once: (0.002 + 0.004) / 2 = 0.003.
         let d = f.insert(&[[0.004, 0.001, 0.001]]);
-        assert_eq!((d.changed.clone(), d.new_slots), (vec![0], 0));
+        assert_eq!((f.latest_changed(), d.new_slots), (vec![0], 0));
         assert!((f.pos[0][0] - 0.003).abs() < 1e-15);
         assert!(f.changed_now(0) && !f.changed_now(1));
         // Out of domain points are counted, not fused.
@@ -856,7 +869,7 @@ mod tests {
             let (want_changed, want_new) = plain.insert(&d, &pts);
             let bits = |v: &[[f64; 3]]| -> Vec<[u64; 3]> { v.iter().map(|p| p.map(f64::to_bits)).collect() };
             assert_eq!(bits(&f.pos), bits(&plain.pos), "step {step}: positions in slot order");
-            let mut got = delta.changed.clone();
+            let mut got = f.latest_changed();
             got.sort_unstable();
             assert_eq!(got, want_changed, "step {step}: changed slots");
             assert_eq!(delta.new_slots, want_new, "step {step}");
@@ -933,8 +946,10 @@ mod tests {
             let pts: Vec<[f64; 3]> = (0..4000)
                 .map(|_| [rng.gen_range(-0.2..0.2), rng.gen_range(-0.2..0.2), rng.gen_range(-0.05..0.05)])
                 .collect();
-            let d = f.insert(&pts);
-            let of_delta = ChangedBlocks::new(&f, &d.changed);
+            f.insert(&pts);
+            // Grouped from the slots stamped by this insertion (pos[], by slot) and read off
+            // the blocks (block-local copies): the same groups.
+            let of_delta = ChangedBlocks::new(&f, &f.changed_since(f.epoch() - 1));
             latest.rebuild_latest(&f);
             assert_eq!(latest.blocks.len(), of_delta.blocks.len());
             for (a, b) in latest.blocks.iter().zip(&of_delta.blocks) {

@@ -957,6 +957,25 @@ pub struct ChangedBlocks {
     indexed: Vec<u32>,
 }
 
+/// What [`ChangedBlocks::push_group`] hands its filler: appends a slot and its position to
+/// the group being made.
+struct GroupFill<'a> {
+    slots: &'a mut Vec<u32>,
+    xyz: &'a mut [Vec<f64>; 3],
+    aabb: Aabb,
+}
+
+impl GroupFill<'_> {
+    #[inline]
+    fn push(&mut self, s: u32, q: [f64; 3]) {
+        self.slots.push(s);
+        for (c, &x) in self.xyz.iter_mut().zip(&q) {
+            c.push(x);
+        }
+        self.aabb.grow(q);
+    }
+}
+
 pub(crate) struct ChangedBlock {
     pub(crate) key: [i32; 3],
     pub(crate) range: (usize, usize),
@@ -976,26 +995,28 @@ impl ChangedBlocks {
     }
 
     /// Groups the slots changed by `fused`'s latest insertion, reusing this value's buffers
-    /// and reading block-local memory only ([`FusedCloud::latest_changes`]); the same groups as
+    /// and reading block-local memory only ([`FusedCloud::latest_blocks`]); the same groups as
     /// [`ChangedBlocks::rebuild`] of its delta.
     pub fn rebuild_latest(&mut self, fused: &FusedCloud) {
         self.reset(fused);
-        fused.latest_changes(|key, it| self.push_group(key, it));
+        for blk in fused.latest_blocks() {
+            self.push_group(blk.key, blk.changed_count(), |g| blk.for_each_change(|s, q| g.push(s, q)));
+        }
         self.index(fused);
     }
 
-    /// Appends one group: block `key` and its slots with their positions, padded to whole
-    /// lanes with points at infinity (never nearest).
-    fn push_group(&mut self, key: [i32; 3], slots: impl IntoIterator<Item = (u32, [f64; 3])>) {
+    /// Appends one group: block `key` and the `n` slots with their positions that `fill`
+    /// pushes, padded to whole lanes with points at infinity (never nearest).
+    #[inline]
+    fn push_group(&mut self, key: [i32; 3], n: usize, fill: impl FnOnce(&mut GroupFill)) {
         let start = self.slots.len();
-        let mut aabb = Aabb::EMPTY;
-        for (s, q) in slots {
-            self.slots.push(s);
-            for (c, &x) in self.xyz.iter_mut().zip(&q) {
-                c.push(x);
-            }
-            aabb.grow(q);
-        }
+        let room = n.next_multiple_of(LANES);
+        self.slots.reserve(room);
+        self.xyz.iter_mut().for_each(|c| c.reserve(room));
+        let mut g = GroupFill { slots: &mut self.slots, xyz: &mut self.xyz, aabb: Aabb::EMPTY };
+        fill(&mut g);
+        let aabb = g.aabb;
+        debug_assert_eq!(self.slots.len() - start, n);
         while (self.slots.len() - start) % LANES != 0 {
             self.slots.push(NONE);
             for c in self.xyz.iter_mut() {
@@ -1063,7 +1084,9 @@ impl ChangedBlocks {
         }
         for run in v.chunk_by(|a, b| a.0 == b.0) {
             let key = fused.domain.block_key(run[0].0 as usize);
-            self.push_group(key, run.iter().map(|&(_, s)| (s, fused.pos[s as usize])));
+            self.push_group(key, run.len(), |g| {
+                run.iter().for_each(|&(_, s)| g.push(s, fused.pos[s as usize]))
+            });
         }
         self.index(fused);
     }

@@ -581,9 +581,8 @@ impl Episode {
             s.renderer.render_into(&self.scene.mesh, &cam, &mut self.now.frame);
             let t_render = t0.elapsed().as_secs_f64();
             self.now.frame.observed_points_into(&mut s.points);
-            let delta = self.now.fused.insert(&s.points);
+            let delta = self.now.fused.insert_grouped(&s.points, &mut s.groups);
             let t_fuse = t0.elapsed().as_secs_f64();
-            s.groups.rebuild_latest(&self.now.fused);
             metrics::update_coverage(&mut self.now.gt, &mut self.now.reference, &self.now.fused, &s.groups);
             (delta, t_render, t_fuse, t0.elapsed().as_secs_f64())
         });

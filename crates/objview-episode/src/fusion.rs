@@ -13,8 +13,8 @@ use std::sync::OnceLock;
 use crate::scratch::Pool;
 
 use crate::grid::{
-    block_of, local_index, lower_best_over, nearest_in, runs_in_box, Aabb, Bucketed, Domain, Slab, SuperGrid,
-    SuperHandle, BLOCK_CELLS, NONE,
+    block_of, local_index, lower_best_over, nearest_in, runs_in_box, Aabb, Bucketed, ChangedBlocks, Domain,
+    Slab, SuperGrid, SuperHandle, BLOCK_CELLS, NONE,
 };
 
 // A block row (x) is one byte of the occupancy words (`FusedBlock::row_occupancy`).
@@ -233,10 +233,10 @@ struct InsertScratch {
     order: Vec<Sorted>,
     /// Every point's fine key.
     keys: Vec<[i32; 3]>,
-    /// The voxels seen for the first time, as (first point, block, local index, centroid), and
-    /// their indices in `fresh` in the order of their first point (the slot order; built
+    /// The voxels seen for the first time, and their indices in `fresh` in the order of their
+    /// first point (the slot order; built
     /// through a per-point table when there are many).
-    fresh: Vec<(u32, u32, u16, [f64; 3])>,
+    fresh: Vec<Fresh>,
     by_first: Vec<u32>,
 }
 
@@ -352,18 +352,36 @@ impl FusedCloud {
     /// points are accumulated with that block's voxel table and sums in cache: in pixel order
     /// they would visit the blocks of a whole scanline again and again.
     pub fn insert(&mut self, points: &[[f64; 3]]) -> FusionDelta {
-        INSERT_SCRATCH.with(|scratch| self.insert_with(points, scratch))
+        INSERT_SCRATCH.with(|scratch| self.insert_with(points, scratch, None))
     }
 
-    /// [`FusedCloud::insert`] with the buffers `s` (whatever they hold is overwritten).
-    fn insert_with(&mut self, points: &[[f64; 3]], s: &mut InsertScratch) -> FusionDelta {
+    /// [`FusedCloud::insert`], and `groups` made the changed slots' groups, as
+    /// [`ChangedBlocks::rebuild_latest`] would make them afterwards: while each block's slots
+    /// and positions are in cache, instead of reading them all again from memory.
+    pub fn insert_grouped(&mut self, points: &[[f64; 3]], groups: &mut ChangedBlocks) -> FusionDelta {
+        INSERT_SCRATCH.with(|scratch| self.insert_with(points, scratch, Some(groups)))
+    }
+
+    /// [`FusedCloud::insert`] with the buffers `s` (whatever they hold is overwritten), making
+    /// `groups` too when given.
+    fn insert_with(
+        &mut self,
+        points: &[[f64; 3]],
+        s: &mut InsertScratch,
+        mut groups: Option<&mut ChangedBlocks>,
+    ) -> FusionDelta {
+        if let Some(g) = groups.as_deref_mut() {
+            g.reset(self);
+        }
         self.epoch += 1;
         let epoch = self.epoch;
         let mut delta = FusionDelta::default();
         // Pass 1: each point's block (allocated on first use) and voxel; per-block counts.
         let mut at = std::mem::take(&mut s.at);
         at.clear();
-        let mut touched: Vec<u32> = Vec::new();
+        // (domain block index, allocation index) of the touched blocks.
+        let mut touched: Vec<(u32, u32)> = std::mem::take(&mut self.latest);
+        touched.clear();
         let mut last: (usize, u32) = (usize::MAX, NONE);
         let mut keys = std::mem::take(&mut s.keys);
         self.domain.keys_into(points, &mut keys);
@@ -388,14 +406,16 @@ impl FusedCloud {
             };
             let blk = &mut self.blocks[t as usize];
             if blk.bucket == 0 {
-                touched.push(t);
+                touched.push((b as u32, t));
             }
             blk.bucket += 1;
             at.push((t, local_index(k) as u16));
         }
-        // Counts → start offsets, then the points by block, in input order.
+        // The blocks in domain order (the spatial order of the metric updates and of the
+        // groups). Counts → start offsets, then the points by block, in input order.
+        touched.sort_unstable();
         let mut offset = 0u32;
-        for &t in &touched {
+        for &(_, t) in &touched {
             let blk = &mut self.blocks[t as usize];
             let n = blk.bucket;
             blk.bucket = offset;
@@ -417,7 +437,7 @@ impl FusedCloud {
         let mut fresh = std::mem::take(&mut s.fresh);
         fresh.clear();
         let mut start = 0usize;
-        for &t in &touched {
+        for &(_, t) in &touched {
             let blk = &mut self.blocks[t as usize];
             let end = blk.bucket as usize;
             blk.bucket = 0;
@@ -439,8 +459,9 @@ impl FusedCloud {
             }
             start = end;
             // In local-index order, so the block's slots and positions are visited in
-            // ascending memory order.
+            // ascending memory order (and the group lists them in that order).
             let f0 = fresh.len();
+            let mut group = groups.as_deref_mut().map(|g| g.begin_group(blk.changed_count()));
             for (w, &bits) in blk.changed_bits.iter().enumerate() {
                 let occupied = blk.occupied[w];
                 let base = blk.before[w] as usize;
@@ -452,7 +473,10 @@ impl FusedCloud {
                     let Accum { sum: a, count, first } = scratch[li];
                     let n = count as f64;
                     if occupied >> b & 1 == 0 {
-                        fresh.push((first, t, li as u16, [a[0] / n, a[1] / n, a[2] / n]));
+                        let c = [a[0] / n, a[1] / n, a[2] / n];
+                        // Its slot is assigned below; the group's entry is filled in then.
+                        let at = group.as_mut().map_or(NONE, |g| g.push(NONE, c) as u32);
+                        fresh.push(Fresh { first, t, li: li as u16, c, at });
                         continue;
                     }
                     let j = base + ones_below(occupied, b);
@@ -461,14 +485,20 @@ impl FusedCloud {
                     let s = blk.slots[j] as usize;
                     self.pos[s] = *c;
                     self.stamp[s] = epoch;
+                    if let Some(g) = group.as_mut() {
+                        g.push(s as u32, *c);
+                    }
                     if let Some(h) = blk.handle {
                         self.supergrid.grow(h, *c);
                     }
                 }
             }
+            if let Some(g) = group {
+                g.end(blk.key);
+            }
             // The block's new voxels get their places now (slots assigned below, in the order
             // of their first points).
-            blk.add(fresh[f0..].iter().map(|f| (f.2 as usize, f.3)));
+            blk.add(fresh[f0..].iter().map(|f| (f.li as usize, f.c)));
         }
         // New slots in the order of their first point (as one pass in input order would). Each
         // point is the first of at most one voxel: many fresh voxels (a first view) are placed
@@ -478,17 +508,20 @@ impl FusedCloud {
         by_first.clear();
         if fresh.len() * FRESH_SORT_SHARE < points.len() {
             by_first.extend(0..fresh.len() as u32);
-            by_first.sort_unstable_by_key(|&j| fresh[j as usize].0);
+            by_first.sort_unstable_by_key(|&j| fresh[j as usize].first);
         } else {
             by_first.resize(points.len(), NONE);
             for (j, f) in fresh.iter().enumerate() {
-                by_first[f.0 as usize] = j as u32;
+                by_first[f.first as usize] = j as u32;
             }
             by_first.retain(|&j| j != NONE);
         }
         for &j in &by_first {
-            let (i, t, li, c) = fresh[j as usize];
+            let Fresh { first: i, t, li, c, at } = fresh[j as usize];
             let s = self.pos.len() as u32;
+            if let Some(g) = groups.as_deref_mut() {
+                g.set_slot(at as usize, s);
+            }
             let blk = &mut self.blocks[t as usize];
             let r = blk.rank(li as usize);
             blk.slots[r] = s;
@@ -504,13 +537,10 @@ impl FusedCloud {
         s.keys = keys;
         delta.new_slots = fresh.len();
         s.fresh = fresh;
-        // Spatial order (block, then voxel) for cache-friendly metric updates: the touched
-        // blocks by domain index, and each one's changed voxels by local index.
-        let mut by_domain = std::mem::take(&mut self.latest);
-        by_domain.clear();
-        by_domain.extend(touched.iter().map(|&t| (self.table_index(t), t)));
-        by_domain.sort_unstable();
-        self.latest = by_domain;
+        if let Some(g) = groups {
+            g.index(self);
+        }
+        self.latest = touched;
         s.at = at;
         s.order = order;
         delta
@@ -612,6 +642,20 @@ impl Bucketed for FusedCloud {
             self.blocks[t as usize].for_run(local_index(first), len, &mut f);
         });
     }
+}
+
+/// A voxel seen for the first time by an insertion.
+#[derive(Clone, Copy)]
+struct Fresh {
+    /// Its first point (the input index: slots are assigned in this order).
+    first: u32,
+    /// Its block (allocation index) and local index.
+    t: u32,
+    li: u16,
+    /// Its centroid.
+    c: [f64; 3],
+    /// Its entry in the insertion's groups (NONE when none are made).
+    at: u32,
 }
 
 /// [`FusedCloud::insert`] sorts its new voxels by first point when they are fewer than the
@@ -941,16 +985,24 @@ mod tests {
         use crate::grid::ChangedBlocks;
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
         let mut f = FusedCloud::new(domain());
-        let mut latest = ChangedBlocks::default();
+        let (mut latest, mut grouped, mut g) =
+            (ChangedBlocks::default(), ChangedBlocks::default(), f.clone());
         for _ in 0..5 {
             let pts: Vec<[f64; 3]> = (0..4000)
                 .map(|_| [rng.gen_range(-0.2..0.2), rng.gen_range(-0.2..0.2), rng.gen_range(-0.05..0.05)])
                 .collect();
-            f.insert(&pts);
+            let df = f.insert(&pts);
+            // The groups made during the insertion: the same cloud, and exactly the groups
+            // read off its blocks afterwards (entries, order, padding, boxes, lookup).
+            let dg = g.insert_grouped(&pts, &mut grouped);
+            let bits = |v: &[[f64; 3]]| -> Vec<[u64; 3]> { v.iter().map(|p| p.map(f64::to_bits)).collect() };
+            assert_eq!(bits(&g.pos), bits(&f.pos));
+            assert_eq!((&g.stamp, &g.latest, dg.new_slots), (&f.stamp, &f.latest, df.new_slots));
+            latest.rebuild_latest(&f);
+            assert_same_groups(&grouped, &latest);
             // Grouped from the slots stamped by this insertion (pos[], by slot) and read off
             // the blocks (block-local copies): the same groups.
             let of_delta = ChangedBlocks::new(&f, &f.changed_since(f.epoch() - 1));
-            latest.rebuild_latest(&f);
             assert_eq!(latest.blocks.len(), of_delta.blocks.len());
             for (a, b) in latest.blocks.iter().zip(&of_delta.blocks) {
                 assert_eq!(a.key, b.key);
@@ -975,6 +1027,23 @@ mod tests {
         }
     }
 
+    /// `a` and `b` hold the same groups, bit for bit and in the same order.
+    fn assert_same_groups(a: &crate::grid::ChangedBlocks, b: &crate::grid::ChangedBlocks) {
+        let xyz = |g: &crate::grid::ChangedBlocks| {
+            g.xyz.clone().map(|c| c.into_iter().map(f64::to_bits).collect::<Vec<_>>())
+        };
+        let blocks = |g: &crate::grid::ChangedBlocks| {
+            g.blocks
+                .iter()
+                .map(|x| (x.key, x.range, x.aabb.lo.map(f64::to_bits), x.aabb.hi.map(f64::to_bits)))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(a.slots, b.slots);
+        assert_eq!(xyz(a), xyz(b));
+        assert_eq!(blocks(a), blocks(b));
+        assert!(a.lookup == b.lookup, "lookup tables differ");
+    }
+
     #[test]
     fn groups_reused_for_another_domain_equal_fresh_ones() {
         // The engine's step buffers go from episode to episode, across objects: a value of
@@ -993,18 +1062,13 @@ mod tests {
         };
         let mut reused = ChangedBlocks::default();
         let mut fa = FusedCloud::new(a);
-        fa.insert(&patch(4000));
-        reused.rebuild_latest(&fa);
+        fa.insert_grouped(&patch(4000), &mut reused);
         let mut fb = FusedCloud::new(b);
         for _ in 0..2 {
-            fb.insert(&patch(3000));
-            reused.rebuild_latest(&fb);
+            fb.insert_grouped(&patch(3000), &mut reused);
             let mut fresh = ChangedBlocks::default();
             fresh.rebuild_latest(&fb);
-            assert!(reused.lookup == fresh.lookup, "lookup tables differ");
-            assert_eq!(reused.slots, fresh.slots);
-            let keys = |g: &ChangedBlocks| g.blocks.iter().map(|x| (x.key, x.range)).collect::<Vec<_>>();
-            assert_eq!(keys(&reused), keys(&fresh));
+            assert_same_groups(&reused, &fresh);
         }
     }
 

@@ -957,22 +957,40 @@ pub struct ChangedBlocks {
     indexed: Vec<u32>,
 }
 
-/// What [`ChangedBlocks::push_group`] hands its filler: appends a slot and its position to
-/// the group being made.
-struct GroupFill<'a> {
-    slots: &'a mut Vec<u32>,
-    xyz: &'a mut [Vec<f64>; 3],
+/// A group of [`ChangedBlocks`] being made ([`ChangedBlocks::begin_group`]): its entries are
+/// laid out (as padding) when it begins, and written in place.
+pub struct GroupFill<'a> {
+    groups: &'a mut ChangedBlocks,
+    start: usize,
+    len: usize,
     aabb: Aabb,
 }
 
 impl GroupFill<'_> {
+    /// Appends a slot and its position (at most the `n` of [`ChangedBlocks::begin_group`]);
+    /// returns its entry (for [`ChangedBlocks::set_slot`]).
     #[inline]
-    fn push(&mut self, s: u32, q: [f64; 3]) {
-        self.slots.push(s);
-        for (c, &x) in self.xyz.iter_mut().zip(&q) {
-            c.push(x);
-        }
+    pub fn push(&mut self, s: u32, q: [f64; 3]) -> usize {
+        let i = self.start + self.len;
+        let g = &mut *self.groups;
+        g.slots[i] = s;
+        g.xyz[0][i] = q[0];
+        g.xyz[1][i] = q[1];
+        g.xyz[2][i] = q[2];
         self.aabb.grow(q);
+        self.len += 1;
+        i
+    }
+
+    /// Closes the group as block `key`'s, padded to whole lanes with points at infinity (never
+    /// nearest).
+    #[inline]
+    pub fn end(self, key: [i32; 3]) {
+        let g = self.groups;
+        let end = self.start + self.len.next_multiple_of(LANES);
+        g.slots.truncate(end);
+        g.xyz.iter_mut().for_each(|c| c.truncate(end));
+        g.blocks.push(ChangedBlock { key, range: (self.start, end), aabb: self.aabb, slab: Slab::NONE });
     }
 }
 
@@ -997,37 +1015,39 @@ impl ChangedBlocks {
     /// Groups the slots changed by `fused`'s latest insertion, reusing this value's buffers
     /// and reading block-local memory only ([`FusedCloud::latest_blocks`]); the same groups as
     /// [`ChangedBlocks::rebuild`] of its delta.
+    /// (The engine has [`FusedCloud::insert_grouped`] make them during the insertion; this is
+    /// the plain way, kept as the tests' reference.)
+    #[cfg(test)]
     pub fn rebuild_latest(&mut self, fused: &FusedCloud) {
         self.reset(fused);
         for blk in fused.latest_blocks() {
-            self.push_group(blk.key, blk.changed_count(), |g| blk.for_each_change(|s, q| g.push(s, q)));
+            let mut g = self.begin_group(blk.changed_count());
+            blk.for_each_change(|s, q| {
+                g.push(s, q);
+            });
+            g.end(blk.key);
         }
         self.index(fused);
     }
 
-    /// Appends one group: block `key` and the `n` slots with their positions that `fill`
-    /// pushes, padded to whole lanes with points at infinity (never nearest).
+    /// Starts the next group, of at most `n` slots: push them, then [`GroupFill::end`] it.
     #[inline]
-    fn push_group(&mut self, key: [i32; 3], n: usize, fill: impl FnOnce(&mut GroupFill)) {
+    pub(crate) fn begin_group(&mut self, n: usize) -> GroupFill<'_> {
         let start = self.slots.len();
-        let room = n.next_multiple_of(LANES);
-        self.slots.reserve(room);
-        self.xyz.iter_mut().for_each(|c| c.reserve(room));
-        let mut g = GroupFill { slots: &mut self.slots, xyz: &mut self.xyz, aabb: Aabb::EMPTY };
-        fill(&mut g);
-        let aabb = g.aabb;
-        debug_assert_eq!(self.slots.len() - start, n);
-        while (self.slots.len() - start) % LANES != 0 {
-            self.slots.push(NONE);
-            for c in self.xyz.iter_mut() {
-                c.push(f64::INFINITY);
-            }
-        }
-        self.blocks.push(ChangedBlock { key, range: (start, self.slots.len()), aabb, slab: Slab::NONE });
+        let end = start + n.next_multiple_of(LANES);
+        self.slots.resize(end, NONE);
+        self.xyz.iter_mut().for_each(|c| c.resize(end, f64::INFINITY));
+        GroupFill { groups: self, start, len: 0, aabb: Aabb::EMPTY }
+    }
+
+    /// Sets the slot of entry `at` (made with a placeholder by [`GroupFill::push`]).
+    #[inline]
+    pub(crate) fn set_slot(&mut self, at: usize, s: u32) {
+        self.slots[at] = s;
     }
 
     /// Clears the groups (and their lookup entries).
-    fn reset(&mut self, fused: &FusedCloud) {
+    pub(crate) fn reset(&mut self, fused: &FusedCloud) {
         let n = fused.domain.num_blocks();
         if self.lookup.len() != n {
             self.lookup = vec![NONE; n];
@@ -1064,7 +1084,7 @@ impl ChangedBlocks {
     }
 
     /// Points the lookup at the groups.
-    fn index(&mut self, fused: &FusedCloud) {
+    pub(crate) fn index(&mut self, fused: &FusedCloud) {
         for (gi, g) in self.blocks.iter().enumerate() {
             if let Some(b) = fused.domain.block_index(g.key) {
                 self.lookup[b] = gi as u32;
@@ -1084,9 +1104,11 @@ impl ChangedBlocks {
         }
         for run in v.chunk_by(|a, b| a.0 == b.0) {
             let key = fused.domain.block_key(run[0].0 as usize);
-            self.push_group(key, run.len(), |g| {
-                run.iter().for_each(|&(_, s)| g.push(s, fused.pos[s as usize]))
-            });
+            let mut g = self.begin_group(run.len());
+            for &(_, s) in run {
+                g.push(s, fused.pos[s as usize]);
+            }
+            g.end(key);
         }
         self.index(fused);
     }

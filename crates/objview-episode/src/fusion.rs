@@ -462,6 +462,9 @@ impl FusedCloud {
             // ascending memory order (and the group lists them in that order).
             let f0 = fresh.len();
             let mut group = groups.as_deref_mut().map(|g| g.begin_group(blk.changed_count()));
+            // The box of the block's changed centroids: its group's, and what its superblock
+            // entry grows by (once per block rather than once per voxel).
+            let mut changed_box = Aabb::EMPTY;
             for (w, &bits) in blk.changed_bits.iter().enumerate() {
                 let occupied = blk.occupied[w];
                 let base = blk.before[w] as usize;
@@ -474,6 +477,7 @@ impl FusedCloud {
                     let n = count as f64;
                     if occupied >> b & 1 == 0 {
                         let c = [a[0] / n, a[1] / n, a[2] / n];
+                        changed_box.grow(c);
                         // Its slot is assigned below; the group's entry is filled in then.
                         let at = group.as_mut().map_or(NONE, |g| g.push(NONE, c) as u32);
                         fresh.push(Fresh { first, t, li: li as u16, c, at });
@@ -485,16 +489,17 @@ impl FusedCloud {
                     let s = blk.slots[j] as usize;
                     self.pos[s] = *c;
                     self.stamp[s] = epoch;
+                    changed_box.grow(*c);
                     if let Some(g) = group.as_mut() {
                         g.push(s as u32, *c);
                     }
-                    if let Some(h) = blk.handle {
-                        self.supergrid.grow(h, *c);
-                    }
                 }
             }
+            if let Some(h) = blk.handle {
+                self.supergrid.grow_box(h, &changed_box);
+            }
             if let Some(g) = group {
-                g.end(blk.key);
+                g.end(blk.key, changed_box);
             }
             // The block's new voxels get their places now (slots assigned below, in the order
             // of their first points).
@@ -525,9 +530,6 @@ impl FusedCloud {
             let blk = &mut self.blocks[t as usize];
             let r = blk.rank(li as usize);
             blk.slots[r] = s;
-            if let Some(h) = blk.handle {
-                self.supergrid.grow(h, c);
-            }
             self.pos.push(c);
             self.key.push(keys[i as usize]);
             self.block.push(self.domain.block_index(blk.key).expect("an allocated block") as u32);
@@ -1042,6 +1044,36 @@ mod tests {
         assert_eq!(xyz(a), xyz(b));
         assert_eq!(blocks(a), blocks(b));
         assert!(a.lookup == b.lookup, "lookup tables differ");
+    }
+
+    #[test]
+    fn superblock_boxes_hold_every_position_a_block_ever_had() {
+        // The superblock entry of a block grows once per insertion by the box of its changed
+        // centroids: it must equal the box of every position any of its voxels ever had,
+        // grown point by point (moves included: a box never shrinks).
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
+        let mut f = FusedCloud::new(domain());
+        let mut shadow: std::collections::HashMap<[i32; 3], Aabb> = Default::default();
+        for step in 0..6 {
+            let (c, r) = ([0.0, 0.0, rng.gen_range(-0.03..0.03)], 0.03 + 0.03 * step as f64);
+            let pts: Vec<[f64; 3]> =
+                (0..3000).map(|_| std::array::from_fn(|a| c[a] + rng.gen_range(-r..r))).collect();
+            f.insert(&pts);
+            for s in f.changed_since(f.epoch() - 1) {
+                let key = f.domain.block_key(f.block[s as usize] as usize);
+                shadow.entry(key).or_insert(Aabb::EMPTY).grow(f.pos[s as usize]);
+            }
+            let bits = |a: &Aabb| (a.lo.map(f64::to_bits), a.hi.map(f64::to_bits));
+            for (key, want) in &shadow {
+                let (_, got) = f
+                    .supergrid
+                    .blocks(key.map(|x| x >> crate::grid::SUPER_SHIFT))
+                    .iter()
+                    .find(|(k, _)| k == key)
+                    .expect("every occupied block is in the supergrid");
+                assert_eq!(bits(got), bits(want), "step {step}, block {key:?}");
+            }
+        }
     }
 
     #[test]

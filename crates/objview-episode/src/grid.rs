@@ -380,6 +380,16 @@ impl SuperGrid {
         self.lists[h.0 as usize][h.1 as usize].1.grow(p);
     }
 
+    /// Grows the box of the block with handle `h` by the box `b` (nothing if it is empty):
+    /// the box [`SuperGrid::grow`] by each of `b`'s points would give.
+    pub fn grow_box(&mut self, h: SuperHandle, b: &Aabb) {
+        let e = &mut self.lists[h.0 as usize][h.1 as usize].1;
+        for a in 0..3 {
+            e.lo[a] = e.lo[a].min(b.lo[a]);
+            e.hi[a] = e.hi[a].max(b.hi[a]);
+        }
+    }
+
     fn index(&self, s: [i32; 3]) -> Option<usize> {
         let x = s[0] - self.lo[0];
         let y = s[1] - self.lo[1];
@@ -963,7 +973,6 @@ pub struct GroupFill<'a> {
     groups: &'a mut ChangedBlocks,
     start: usize,
     len: usize,
-    aabb: Aabb,
 }
 
 impl GroupFill<'_> {
@@ -977,20 +986,19 @@ impl GroupFill<'_> {
         g.xyz[0][i] = q[0];
         g.xyz[1][i] = q[1];
         g.xyz[2][i] = q[2];
-        self.aabb.grow(q);
         self.len += 1;
         i
     }
 
-    /// Closes the group as block `key`'s, padded to whole lanes with points at infinity (never
-    /// nearest).
+    /// Closes the group as block `key`'s with `aabb`, the box of its positions, padded to whole
+    /// lanes with points at infinity (never nearest).
     #[inline]
-    pub fn end(self, key: [i32; 3]) {
+    pub fn end(self, key: [i32; 3], aabb: Aabb) {
         let g = self.groups;
         let end = self.start + self.len.next_multiple_of(LANES);
         g.slots.truncate(end);
         g.xyz.iter_mut().for_each(|c| c.truncate(end));
-        g.blocks.push(ChangedBlock { key, range: (self.start, end), aabb: self.aabb, slab: Slab::NONE });
+        g.blocks.push(ChangedBlock { key, range: (self.start, end), aabb, slab: Slab::NONE });
     }
 }
 
@@ -1021,11 +1029,12 @@ impl ChangedBlocks {
     pub fn rebuild_latest(&mut self, fused: &FusedCloud) {
         self.reset(fused);
         for blk in fused.latest_blocks() {
-            let mut g = self.begin_group(blk.changed_count());
+            let (mut g, mut aabb) = (self.begin_group(blk.changed_count()), Aabb::EMPTY);
             blk.for_each_change(|s, q| {
                 g.push(s, q);
+                aabb.grow(q);
             });
-            g.end(blk.key);
+            g.end(blk.key, aabb);
         }
         self.index(fused);
     }
@@ -1037,7 +1046,7 @@ impl ChangedBlocks {
         let end = start + n.next_multiple_of(LANES);
         self.slots.resize(end, NONE);
         self.xyz.iter_mut().for_each(|c| c.resize(end, f64::INFINITY));
-        GroupFill { groups: self, start, len: 0, aabb: Aabb::EMPTY }
+        GroupFill { groups: self, start, len: 0 }
     }
 
     /// Sets the slot of entry `at` (made with a placeholder by [`GroupFill::push`]).
@@ -1104,11 +1113,13 @@ impl ChangedBlocks {
         }
         for run in v.chunk_by(|a, b| a.0 == b.0) {
             let key = fused.domain.block_key(run[0].0 as usize);
-            let mut g = self.begin_group(run.len());
+            let (mut g, mut aabb) = (self.begin_group(run.len()), Aabb::EMPTY);
             for &(_, s) in run {
-                g.push(s, fused.pos[s as usize]);
+                let q = fused.pos[s as usize];
+                g.push(s, q);
+                aabb.grow(q);
             }
-            g.end(key);
+            g.end(key, aabb);
         }
         self.index(fused);
     }

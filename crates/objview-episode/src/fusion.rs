@@ -382,35 +382,44 @@ impl FusedCloud {
         // (domain block index, allocation index) of the touched blocks.
         let mut touched: Vec<(u32, u32)> = std::mem::take(&mut self.latest);
         touched.clear();
-        let mut last: (usize, u32) = (usize::MAX, NONE);
         let mut keys = std::mem::take(&mut s.keys);
         self.domain.keys_into(points, &mut keys);
+        // The current run of points in one block (pixels along a row mostly stay in one):
+        // its block key, domain index, allocation index and length, counted into the block
+        // when the run ends.
+        let mut run: ([i32; 3], usize, u32, u32) = ([i32::MIN; 3], usize::MAX, NONE, 0);
+        let mut end_run = |blocks: &mut [FusedBlock], (_, b, t, n): ([i32; 3], usize, u32, u32)| {
+            if n > 0 {
+                let blk = &mut blocks[t as usize];
+                if blk.bucket == 0 {
+                    touched.push((b as u32, t));
+                }
+                blk.bucket += n;
+            }
+        };
         for &k in &keys {
-            let Some(b) = self.domain.block_index(block_of(k)) else {
-                delta.dropped += 1;
-                at.push((NONE, 0));
-                continue;
-            };
-            let t = if b == last.0 {
-                last.1
-            } else {
+            let bk = block_of(k);
+            if bk != run.0 {
+                end_run(&mut self.blocks, run);
+                let Some(b) = self.domain.block_index(bk) else {
+                    delta.dropped += 1;
+                    at.push((NONE, 0));
+                    run = ([i32::MIN; 3], usize::MAX, NONE, 0);
+                    continue;
+                };
                 let mut t = self.table[b];
                 if t == NONE {
                     t = self.blocks.len() as u32;
                     self.table[b] = t;
-                    let handle = self.supergrid.add_block(self.domain.block_key(b));
-                    self.blocks.push(FusedBlock::new(self.domain.block_key(b), handle));
+                    let handle = self.supergrid.add_block(bk);
+                    self.blocks.push(FusedBlock::new(bk, handle));
                 }
-                last = (b, t);
-                t
-            };
-            let blk = &mut self.blocks[t as usize];
-            if blk.bucket == 0 {
-                touched.push((b as u32, t));
+                run = (bk, b, t, 0);
             }
-            blk.bucket += 1;
-            at.push((t, local_index(k) as u16));
+            run.3 += 1;
+            at.push((run.2, local_index(k) as u16));
         }
+        end_run(&mut self.blocks, run);
         // The blocks in domain order (the spatial order of the metric updates and of the
         // groups). Counts → start offsets, then the points by block, in input order.
         touched.sort_unstable();

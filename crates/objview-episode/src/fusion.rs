@@ -355,9 +355,10 @@ impl FusedCloud {
         INSERT_SCRATCH.with(|scratch| self.insert_with(points, scratch, None))
     }
 
-    /// [`FusedCloud::insert`], and `groups` made the changed slots' groups, as
-    /// [`ChangedBlocks::rebuild_latest`] would make them afterwards: while each block's slots
-    /// and positions are in cache, instead of reading them all again from memory.
+    /// [`FusedCloud::insert`], and `groups` made the groups of the changed slots — the groups
+    /// [`ChangedBlocks::new`] makes of [`FusedCloud::latest_changed`], bit for bit and in the
+    /// same order (tested) — during the insertion, while each block's slots and positions are
+    /// in cache, instead of reading them all again from memory afterwards.
     pub fn insert_grouped(&mut self, points: &[[f64; 3]], groups: &mut ChangedBlocks) -> FusionDelta {
         INSERT_SCRATCH.with(|scratch| self.insert_with(points, scratch, Some(groups)))
     }
@@ -580,7 +581,7 @@ impl FusedCloud {
     }
 
     /// The slots created or moved by the insertions after insertion `epoch` (0: every slot), in
-    /// the spatial order of [`FusionDelta::changed`] (block, then voxel).
+    /// the spatial order of [`FusedCloud::latest_changed`] (block, then voxel).
     ///
     /// Read off the blocks in domain order and each block's slots (in local order; a voxel
     /// holds at most one slot), instead of sorting the slots by that key: at a first checkpoint

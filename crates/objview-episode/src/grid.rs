@@ -969,7 +969,7 @@ pub struct ChangedBlocks {
 
 /// A group of [`ChangedBlocks`] being made ([`ChangedBlocks::begin_group`]): its entries are
 /// laid out (as padding) when it begins, and written in place.
-pub struct GroupFill<'a> {
+pub(crate) struct GroupFill<'a> {
     groups: &'a mut ChangedBlocks,
     start: usize,
     len: usize,
@@ -979,7 +979,7 @@ impl GroupFill<'_> {
     /// Appends a slot and its position (at most the `n` of [`ChangedBlocks::begin_group`]);
     /// returns its entry (for [`ChangedBlocks::set_slot`]).
     #[inline]
-    pub fn push(&mut self, s: u32, q: [f64; 3]) -> usize {
+    pub(crate) fn push(&mut self, s: u32, q: [f64; 3]) -> usize {
         let i = self.start + self.len;
         let g = &mut *self.groups;
         g.slots[i] = s;
@@ -993,7 +993,7 @@ impl GroupFill<'_> {
     /// Closes the group as block `key`'s with `aabb`, the box of its positions, padded to whole
     /// lanes with points at infinity (never nearest).
     #[inline]
-    pub fn end(self, key: [i32; 3], aabb: Aabb) {
+    pub(crate) fn end(self, key: [i32; 3], aabb: Aabb) {
         let g = self.groups;
         let end = self.start + self.len.next_multiple_of(LANES);
         g.slots.truncate(end);

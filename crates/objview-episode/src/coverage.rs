@@ -21,9 +21,11 @@
 //! is never looked at again. On observed surfaces that happens at the first view that sees
 //! them (the target's own voxel is within h√3 ≈ 0.0087 < 0.01 of all its points). Such a
 //! target is settled before any search: each target knows which of the 27 voxels around it lie
-//! entirely within τ_min of it (computed once per scene), and the first occupied one — its own
+//! entirely within τ_min of it (computed once per scene), and any of them occupied — its own
 //! voxel, or a neighbour where the view left its own voxel empty (pixels are ~1.4 voxels wide
-//! at the SPEC's distance) — gives the witness slot.
+//! at the SPEC's distance) — retires it. Nothing reads a retired target's distance but the
+//! comparisons with each τ², which it passes for good: it is stored as 0, and the occupied
+//! voxel's slot and position are never looked up.
 //!
 //! A live target with nothing fused within τ_max (most of the live targets an update looks
 //! at: the unseen side of a wall, the far half of a block next to a new patch) can change only
@@ -88,9 +90,6 @@ fn near_bit(d: [i32; 3]) -> u32 {
     ((d[0] + 1) + 3 * (d[1] + 1) + 9 * (d[2] + 1)) as u32
 }
 
-/// The own voxel's bit in [`Index::near`].
-const NEAR_OWN: u32 = 13;
-
 const _: () = assert!(crate::grid::BLOCK_CELLS <= u16::MAX as usize + 1);
 
 /// Per-worker buffers of [`Coverage::block_changes`], kept across target blocks.
@@ -127,7 +126,8 @@ pub struct Coverage {
     retire2: f64,
     /// Nearest-fused d² (∞: none below τ_max) — exact while at least τ_min²; below τ_min² it
     /// is the distance to the slot `nn`, which covers the target at every τ, and may be an
-    /// overestimate (nothing needs more); frozen once retired.
+    /// overestimate (nothing needs more); frozen once retired (0 when retired by an occupied
+    /// voxel of its neighbourhood, whose point is never looked up).
     d2: Vec<f64>,
     /// Nearest slot, or NONE.
     nn: Vec<u32>,
@@ -338,7 +338,7 @@ impl Coverage {
         let epoch = fused.epoch();
         // The fused blocks around this target block (3×3×3, by block offset): a target with an
         // occupied voxel among those of its neighbourhood that lie entirely within τ_min of it
-        // ([`Index::near`]) retires at once, that voxel's slot its witness, with no search.
+        // ([`Index::near`]) retires at once, with no search.
         let around: [Option<&FusedBlock>; 27] = std::array::from_fn(|b| {
             let o = near_offset(b as u32);
             domain
@@ -377,12 +377,13 @@ impl Coverage {
                     continue;
                 }
             }
-            let p = self.ix.pts[iu];
             let rows = rows.get_or_insert_with(|| NeighbourRows::new(&around));
-            if let Some((s, q)) = rows.witness(&around, li, self.ix.near[iu]) {
-                out.push(Change { target: i, d2: dist2(p, q), nn: s, retire: true });
+            if rows.any_occupied(li, self.ix.near[iu]) {
+                // Within τ_min of that voxel's point, for good: covered at every τ.
+                out.push(Change { target: i, d2: 0.0, nn: NONE, retire: true });
                 continue;
             }
+            let p = self.ix.pts[iu];
             let moved = old_nn != NONE && fused.stamp[old_nn as usize] == epoch;
             if old < self.tmin2 {
                 // Covered at every τ by `old_nn`: nothing to do while it stays within τ_min.
@@ -522,13 +523,12 @@ impl NeighbourRows {
         NeighbourRows { rows }
     }
 
-    /// The slot and position of an occupied voxel among the neighbours `mask` ([`Index::near`])
-    /// of the fine voxel with local index `li`, or `None`: the own voxel first, then by
-    /// ascending bit, so the witness depends on nothing but the cloud.
+    /// Whether any of the neighbours `mask` ([`Index::near`]) of the fine voxel with local
+    /// index `li` is occupied.
     #[inline]
-    fn witness(&self, around: &[Option<&FusedBlock>; 27], li: usize, mask: u32) -> Option<(u32, [f64; 3])> {
+    fn any_occupied(&self, li: usize, mask: u32) -> bool {
         if mask == 0 {
-            return None;
+            return false;
         }
         let m = BLOCK as usize - 1;
         let s = BLOCK_SHIFT as usize;
@@ -541,17 +541,7 @@ impl NeighbourRows {
                 occupied |= ((self.rows[z + dz][y + dy] >> x) as u32 & 7) << (3 * (dy + 3 * dz));
             }
         }
-        let hit = occupied & mask;
-        if hit == 0 {
-            return None;
-        }
-        let b = if hit >> NEAR_OWN & 1 == 1 { NEAR_OWN } else { hit.trailing_zeros() };
-        let d = near_offset(b);
-        let c = [x as i32 + d[0], y as i32 + d[1], z as i32 + d[2]];
-        let ob = near_bit([c[0] >> BLOCK_SHIFT, c[1] >> BLOCK_SHIFT, c[2] >> BLOCK_SHIFT]);
-        let w = around[ob as usize].and_then(|fb| fb.slot_and_position(local_index(c)));
-        debug_assert!(w.is_some(), "an occupied neighbour has a slot");
-        w
+        occupied & mask != 0
     }
 }
 

@@ -106,18 +106,6 @@ impl FusedBlock {
         (self.occupied[li >> 6] >> (li & 63)) as u8
     }
 
-    /// The slot of fine voxel `li` (local index) and its position, read from the block's own
-    /// copy (no cache miss into [`FusedCloud::pos`]), or `None` when the voxel is empty.
-    #[inline]
-    pub fn slot_and_position(&self, li: usize) -> Option<(u32, [f64; 3])> {
-        if self.is_occupied(li) {
-            let j = self.rank(li);
-            Some((self.slots[j], self.centroids[j]))
-        } else {
-            None
-        }
-    }
-
     /// Calls `f(slot, position)` for the occupied voxels with local indices `li..li + len`, all
     /// in one word of the occupancy (an x-run of the block: `len` ≤ [`crate::grid::BLOCK`]).
     #[inline]

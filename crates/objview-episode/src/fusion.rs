@@ -222,8 +222,7 @@ struct InsertScratch {
     /// Every point's fine key.
     keys: Vec<[i32; 3]>,
     /// The voxels seen for the first time, and their indices in `fresh` in the order of their
-    /// first point (the slot order; built
-    /// through a per-point table when there are many).
+    /// first point (the slot order; built through a per-point table when there are many).
     fresh: Vec<Fresh>,
     by_first: Vec<u32>,
 }
@@ -264,7 +263,8 @@ struct Accum {
 /// What one insertion changed.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct FusionDelta {
-    /// Slots created by this insertion (those it moved: [`FusedCloud::latest_changed`]).
+    /// How many slots this insertion created (the slots it created or moved:
+    /// [`FusedCloud::latest_changed`]).
     pub new_slots: usize,
     /// Observed points outside the domain (dropped; never expected for points on the mesh).
     pub dropped: usize,

@@ -139,6 +139,22 @@ impl FusedBlock {
         }
     }
 
+    /// Calls `f(local index, slot, position)` for each occupied voxel of the block, in
+    /// local-index order, from block-local memory.
+    #[inline]
+    pub fn for_each_voxel(&self, mut f: impl FnMut(usize, u32, [f64; 3])) {
+        let mut j = 0;
+        for (w, &word) in self.occupied.iter().enumerate() {
+            let mut bits = word;
+            while bits != 0 {
+                let li = (w << 6) | bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                f(li, self.slots[j], self.centroids[j]);
+                j += 1;
+            }
+        }
+    }
+
     /// How many voxels the latest insertion that touched the block changed.
     #[inline]
     pub fn changed_count(&self) -> usize {

@@ -37,8 +37,8 @@
 use crate::fusion::FusedCloud;
 use crate::grid::{
     above, block_of, cell_of_key, dist2, keyed_points, local_index, lower_best_over, nearest_in,
-    nearest_in_block, runs_in_box, Aabb, BlockSearch, Bucketed, ChangedBlocks, Domain, Slab, SuperGrid,
-    BLOCK, BLOCK_CELLS, BLOCK_SHIFT, NONE,
+    nearest_in_block, nearest_in_block_with, runs_in_box, Aabb, BlockSearch, Bucketed, ChangedBlocks, Domain,
+    Slab, SuperGrid, BLOCK, BLOCK_CELLS, BLOCK_SHIFT, NONE,
 };
 use rayon::prelude::*;
 
@@ -483,7 +483,9 @@ impl Targets {
                 (self.d2[i], self.nn[i]) = (f64::INFINITY, NONE);
             }
         }
-        let found = self.nearest_by_block(fused, &rest);
+        // A target the pairs found nothing for has no slot in the 27 voxels around it.
+        let d2 = &self.d2;
+        let found = self.nearest_by_block_with(fused, &rest, |i| d2[i as usize] == f64::INFINITY);
         for (&i, &(d, s)) in rest.iter().zip(&found) {
             (self.d2[i as usize], self.nn[i as usize]) =
                 if s == NONE { (f64::INFINITY, NONE) } else { (d, s) };
@@ -613,6 +615,17 @@ impl Targets {
     /// `(cap², NONE)`, by one [`nearest_in_block`] per target block (a block's targets are
     /// consecutive), in parallel on the current rayon pool.
     fn nearest_by_block(&self, fused: &FusedCloud, idx: &[u32]) -> Vec<(f64, u32)> {
+        self.nearest_by_block_with(fused, idx, |_| false)
+    }
+
+    /// [`Targets::nearest_by_block`], told which targets have no fused point in the 27 voxels
+    /// around them (`nothing_near(target)`; see [`nearest_in_block_with`]).
+    fn nearest_by_block_with(
+        &self,
+        fused: &FusedCloud,
+        idx: &[u32],
+        nothing_near: impl Fn(u32) -> bool + Sync,
+    ) -> Vec<(f64, u32)> {
         let found: Vec<Vec<(f64, u32)>> = self
             .block_spans(idx)
             .par_iter()
@@ -622,7 +635,10 @@ impl Targets {
                     pts.clear();
                     pts.extend(idx[s..e].iter().map(|&i| self.ix.pts[i as usize]));
                     let mut out = Vec::with_capacity(e - s);
-                    nearest_in_block(fused, pts, self.cap2, scratch, &mut out);
+                    let span = &idx[s..e];
+                    nearest_in_block_with(fused, pts, self.cap2, scratch, &mut out, |j| {
+                        nothing_near(span[j])
+                    });
                     out
                 },
             )

@@ -727,6 +727,22 @@ pub fn nearest_in_block<S: Bucketed>(
     scratch: &mut BlockSearch,
     out: &mut Vec<(f64, u32)>,
 ) {
+    nearest_in_block_with(set, pts, bound2, scratch, out, |_| false)
+}
+
+/// [`nearest_in_block`], told which points (`nothing_near(i)` for `pts[i]`, i ≥ 1) have no
+/// point of `set` in the 27 fine voxels around them: those go straight to the search of whole
+/// blocks, without first looking at those voxels (which would find nothing). The answers are
+/// the same whatever `nothing_near` says (the block search alone is complete); it only saves
+/// the lookups.
+pub fn nearest_in_block_with<S: Bucketed>(
+    set: &S,
+    pts: &[[f64; 3]],
+    bound2: f64,
+    scratch: &mut BlockSearch,
+    out: &mut Vec<(f64, u32)>,
+    nothing_near: impl Fn(usize) -> bool,
+) {
     out.clear();
     let Some(&first) = pts.first() else { return };
     let domain = set.domain();
@@ -758,23 +774,25 @@ pub fn nearest_in_block<S: Bucketed>(
     let h2 = domain.h * domain.h;
     let mut gathered = false;
     let mut prev = s0;
-    for &p in &pts[1..] {
+    for (i, &p) in pts.iter().enumerate().skip(1) {
         let mut b0 = start(p);
         if prev != NONE {
             b0 = b0.min(above(dist2(p, set.position(prev))));
         }
         let mut best = (b0, NONE);
-        // Anything outside the 27 voxels around p is at least h away.
-        let k = domain.key(p);
-        scan_around(set, p, k, &mut best);
-        // An answer within 3h is likely just beyond the 27 voxels: the next layer of voxels
-        // (see `scan_ring2`) before the search of whole blocks.
-        if best.0 <= h2 || (best.0 <= RING2_TRY * h2 && scan_ring2(set, p, k, &mut best)) {
-            if best.1 != NONE {
-                prev = best.1;
+        if !nothing_near(i) {
+            // Anything outside the 27 voxels around p is at least h away.
+            let k = domain.key(p);
+            scan_around(set, p, k, &mut best);
+            // An answer within 3h is likely just beyond the 27 voxels: the next layer of voxels
+            // (see `scan_ring2`) before the search of whole blocks.
+            if best.0 <= h2 || (best.0 <= RING2_TRY * h2 && scan_ring2(set, p, k, &mut best)) {
+                if best.1 != NONE {
+                    prev = best.1;
+                }
+                out.push(best);
+                continue;
             }
-            out.push(best);
-            continue;
         }
         if !gathered {
             gathered = true;
@@ -1655,8 +1673,26 @@ mod tests {
                 .filter(|&p| block_of(domain.key(p)) == bk)
                 .collect();
             let bound2 = if trial % 3 == 0 { 0.04 } else { f64::INFINITY };
+            // Told nothing (as `nearest_in_block`), told the truth about the 27 voxels around
+            // each point, told that none has anything near (a lie where it does): the same
+            // answers.
+            let near = |p: [f64; 3]| {
+                let k = domain.key(p);
+                all.iter().any(|&q| {
+                    let kq = domain.key(q);
+                    (0..3).all(|a| (kq[a] - k[a]).abs() <= 1)
+                })
+            };
+            let truth: Vec<bool> = pts.iter().map(|&p| !near(p)).collect();
+            let mut told = Vec::new();
+            nearest_in_block_with(&fused, &pts, bound2, &mut scratch, &mut told, |i| truth[i]);
+            let mut lied = Vec::new();
+            nearest_in_block_with(&fused, &pts, bound2, &mut scratch, &mut lied, |_| true);
             nearest_in_block(&fused, &pts, bound2, &mut scratch, &mut out);
             assert_eq!(out.len(), pts.len());
+            for (o, (t, l)) in out.iter().zip(told.iter().zip(&lied)) {
+                assert_eq!((o.0, t.0), (l.0, l.0), "trial {trial}");
+            }
             for (&p, &(d, s)) in pts.iter().zip(&out) {
                 let want = brute(&all, p, bound2);
                 assert_eq!(d, want, "trial {trial}: {p:?}");

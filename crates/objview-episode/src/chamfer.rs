@@ -257,11 +257,15 @@ impl Targets {
     }
 
     /// Updates every distance to `fused` as it is now; `changed` must list every slot created or
-    /// moved since the previous update (stamped after it), each once.
+    /// moved since the previous update (stamped after it), each once. `fused` must be on the
+    /// targets' voxel grid (the same voxel size; the grid is anchored at the origin): panics
+    /// otherwise.
     ///
     /// Returns, per changed slot, the squared distance to the nearest target (the fused→target
     /// distance, which the push finds for free within h; a full search otherwise).
     pub fn update(&mut self, fused: &FusedCloud, changed: &[u32]) -> Vec<f64> {
+        // The push and the pairs find the targets around a slot by its voxel key.
+        assert_eq!(fused.domain.h, self.ix.domain.h, "fused cloud and targets on different voxel grids");
         // Where most slots changed (the first update, a checkpoint after many views), every
         // distance is searched again; otherwise the changes are pushed to the targets near them.
         let pull = changed.len().saturating_mul(PULL_SHARE) >= fused.len();
@@ -800,6 +804,16 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    #[should_panic(expected = "different voxel grids")]
+    fn an_update_from_a_cloud_on_another_grid_panics() {
+        let (mut rng, _, _, mut t) = patch_targets(4, 500);
+        let mut fused = FusedCloud::new(Domain::covering(0.004, [-0.6; 3], [0.6; 3], 0.05));
+        fused.insert(&patch(&mut rng, 1000));
+        let changed = fused.changed_since(0);
+        t.update(&fused, &changed);
     }
 
     #[test]

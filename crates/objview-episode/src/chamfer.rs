@@ -36,9 +36,9 @@
 
 use crate::fusion::FusedCloud;
 use crate::grid::{
-    above, block_of, cell_of_key, dist2, keyed_points, local_index, lower_best_over, nearest_in,
-    nearest_in_block, nearest_in_block_with, runs_in_box, Aabb, BlockSearch, Bucketed, ChangedBlocks, Domain,
-    Slab, SuperGrid, BLOCK, BLOCK_CELLS, BLOCK_SHIFT, NONE,
+    above, block_of, cell_of_key, dist2, keyed_points, local_coords, local_index, lower_best_over,
+    nearest_in, nearest_in_block, nearest_in_block_with, runs_in_box, Aabb, BlockSearch, Bucketed,
+    ChangedBlocks, Domain, Slab, SuperGrid, BLOCK, BLOCK_CELLS, BLOCK_SHIFT, NONE,
 };
 use rayon::prelude::*;
 
@@ -449,12 +449,8 @@ impl Targets {
             let blk = &fused.blocks[t as usize];
             let base = blk.key.map(|x| x << BLOCK_SHIFT);
             blk.for_each_voxel(|li, s, p| {
-                let m = (BLOCK - 1) as usize;
-                let k = [
-                    base[0] + (li & m) as i32,
-                    base[1] + ((li >> BLOCK_SHIFT) & m) as i32,
-                    base[2] + (li >> (2 * BLOCK_SHIFT)) as i32,
-                ];
+                let l = local_coords(li);
+                let k = [0, 1, 2].map(|a| base[a] + l[a] as i32);
                 let mut best = f64::INFINITY;
                 ix.for_filled_runs_in_box(k.map(|x| x - 1), k.map(|x| x + 1), |lo, hi| {
                     for i in lo as usize..hi as usize {

@@ -43,8 +43,8 @@ use rayon::prelude::*;
 
 use crate::fusion::{FusedBlock, FusedCloud};
 use crate::grid::{
-    box_box_dist2, cell_of_key, dist2, keyed_points, local_index, Aabb, ChangedBlocks, Domain, BLOCK,
-    BLOCK_SHIFT, NONE,
+    box_box_dist2, cell_of_key, dist2, keyed_points, local_coords, local_index, Aabb, ChangedBlocks, Domain,
+    BLOCK, NONE,
 };
 
 /// Safety margin (units²) of the retirement test: a voxel counts as inside the ball only with
@@ -80,8 +80,9 @@ struct Index {
 /// index `li` in its block.
 #[inline]
 fn octant_of(li: usize) -> usize {
-    let (b, half) = (BLOCK as usize, BLOCK as usize / 2);
-    (li % b / half) | (li / b % b / half) << 1 | (li / (b * b) / half) << 2
+    let half = BLOCK as usize / 2;
+    let [x, y, z] = local_coords(li);
+    (x / half) | (y / half) << 1 | (z / half) << 2
 }
 
 /// The bit of the fine voxel at offset `d` (each −1, 0 or 1 per axis) in [`Index::near`].
@@ -530,9 +531,7 @@ impl NeighbourRows {
         if mask == 0 {
             return false;
         }
-        let m = BLOCK as usize - 1;
-        let s = BLOCK_SHIFT as usize;
-        let (x, y, z) = (li & m, li >> s & m, li >> (2 * s));
+        let [x, y, z] = local_coords(li);
         // Bit near_bit(d) of `occupied` for the voxel at offset d: rows y − 1..=y + 1 and
         // z − 1..=z + 1 are rows[z..=z + 2][y..=y + 2], voxels x − 1..=x + 1 their bits x..=x + 2.
         let mut occupied = 0u32;

@@ -141,6 +141,14 @@ pub fn local_index(k: [i32; 3]) -> usize {
     ((k[0] & m) + BLOCK * ((k[1] & m) + BLOCK * (k[2] & m))) as usize
 }
 
+/// The coordinates (x, y, z; each 0..[`BLOCK`]) inside its block of the fine voxel with local
+/// index `li`: the inverse of [`local_index`].
+#[inline]
+pub fn local_coords(li: usize) -> [usize; 3] {
+    let (m, s) = (BLOCK as usize - 1, BLOCK_SHIFT as usize);
+    [li & m, li >> s & m, li >> (2 * s)]
+}
+
 /// Squared Euclidean distance.
 #[inline]
 pub fn dist2(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -1212,6 +1220,19 @@ impl ChangedBlocks {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn local_coords_invert_local_index() {
+        for li in 0..BLOCK_CELLS {
+            let c = local_coords(li);
+            assert!(c.iter().all(|&x| x < BLOCK as usize));
+            // Any block: the same local index.
+            for base in [[0, 0, 0], [-8, 16, -24]] {
+                let k = [0, 1, 2].map(|a| base[a] + c[a] as i32);
+                assert_eq!(local_index(k), li);
+            }
+        }
+    }
 
     #[test]
     fn key_box_is_the_keys_of_the_domain_blocks() {

@@ -25,10 +25,22 @@
 //!   patching each subtour solution into a path. HiGHS runs with a relative and absolute gap of
 //!   0; each solve is the optimum of a relaxation (fewer subtour constraints), hence a lower bound,
 //!   and the loop stops as soon as the best path meets it.
+//! - symmetric instances of at least [`LP_CUTS_MIN_NODES`] nodes (a hybrid's set-cover plan of
+//!   50–129 views) first run an *LP stage*: the LP relaxation is solved and every subtour
+//!   constraint its solution violates is added (the support's components, or the cuts below 2
+//!   of a Stoer–Wagner minimum cut), until none is (the Held–Karp bound); a path read off the
+//!   LP solution (greedy edges by LP value) and improved by 2-opt + Or-opt replaces the
+//!   heuristic path when shorter; and every edge whose LP reduced cost exceeds the gap between
+//!   the best path and the LP bound (plus a margin of 1e-3 × the length, far above the LP's
+//!   tolerances) is fixed at 0 — no shortest path can use it — before each integer solve. All
+//!   three only tighten or shrink the integer program: its optimum, hence the returned length,
+//!   is the same; the integer loop then needs fewer and smaller solves.
 //!
 //! Measured (ci profile, a shared 2-core VM, shell distances of random points on the radius-3
 //! sphere): the DP takes ~6 ms at 16 nodes and ~0.2 s at 20; the ILP 0.02–0.09 s at 31 nodes,
-//! 0.03–0.3 s at 51, 0.15–0.35 s at 65 and 0.6–9 s at 129 (2–12 HiGHS solves).
+//! 0.03–0.3 s at 51, 0.15–0.35 s at 65 and 0.6–9 s at 129 (2–12 HiGHS solves) without the LP
+//! stage; `cargo run --profile ci -p objview-planners --example tsp_bench` times both on the
+//! same instances (README, "Hybrid planners").
 //!
 //! Exactness: "optimal" means proven by the DP, or by HiGHS within its numerical tolerances plus
 //! a relative slack of [`OPTIMALITY_RTOL`] between the best path and the proven bound. If the
@@ -59,6 +71,20 @@ pub const DP_NODES_LIMIT: usize = 20;
 pub const OPTIMALITY_RTOL: f64 = 1e-9;
 /// HiGHS `random_seed` (fixed for determinism).
 const HIGHS_RANDOM_SEED: i32 = 0;
+/// Symmetric instances with at least this many nodes tighten the LP relaxation with subtour
+/// constraints before the first integer solve (the LP stage, module docs). Smaller ones are solved
+/// as before: there the integer loop takes a few hundredths of a second.
+pub const LP_CUTS_MIN_NODES: usize = 48;
+/// A subtour constraint is added by the LP stage when the cut around its set carries less than
+/// 2 − this (the constraint is violated by more than half of it).
+const CUT_EPS: f64 = 1e-6;
+/// Most LP rounds of [`tighten_relaxation`].
+const MAX_LP_ROUNDS: usize = 100;
+/// Relative margin (× max(1, length)) of the reduced-cost fixing after the LP stage: an edge
+/// is fixed at 0 only when its reduced cost exceeds the gap between the best path and the LP
+/// bound by this much more — orders of magnitude above HiGHS's tolerances (1e-7), so that no
+/// edge of a shortest path is ever fixed.
+const FIX_MARGIN: f64 = 1e-3;
 /// Relative size of the smallest improvement a local-search move must bring (guards against
 /// cycling on rounding noise).
 const IMPROVE_RTOL: f64 = 1e-10;
@@ -217,8 +243,16 @@ pub struct TspResult {
     pub seconds: f64,
     /// Number of HiGHS solves (0 for the DP).
     pub ilp_solves: usize,
-    /// Number of subtour elimination constraints added.
+    /// Number of subtour elimination constraints added (by the LP stage and the integer loop).
     pub cuts: usize,
+    /// Number of LP solves of the LP stage (symmetric instances of at least
+    /// [`LP_CUTS_MIN_NODES`] nodes; absent from the JSON when 0).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub lp_solves: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 /// The shortest path over all nodes of `dist` that starts at `start` and ends anywhere (see the
@@ -250,10 +284,33 @@ pub fn shortest_open_path(
             seconds: 0.0,
             ilp_solves: 0,
             cuts: 0,
+            lp_solves: 0,
         }
     } else {
-        solve_with_ilp(dist, start, symmetric, settings, t0)?
+        solve_with_ilp(dist, start, symmetric, settings, t0, LP_CUTS_MIN_NODES)?
     };
+    result.seconds = t0.elapsed().as_secs_f64();
+    Ok(result)
+}
+
+/// [`shortest_open_path`] with the LP stage's node threshold chosen (`usize::MAX`: the integer
+/// loop alone, as below [`LP_CUTS_MIN_NODES`]) — for benchmarks and tests that compare the two
+/// on the same instances.
+pub fn shortest_open_path_with_lp_stage_from(
+    dist: &[Vec<f64>],
+    start: usize,
+    settings: &TspSettings,
+    lp_cuts_min_nodes: usize,
+) -> Result<TspResult, TspError> {
+    settings.validate()?;
+    validate_matrix(dist, start)?;
+    let t0 = Instant::now();
+    let n = dist.len();
+    let symmetric = is_symmetric(dist);
+    if n <= 2 || n <= settings.dp_max_nodes {
+        return shortest_open_path(dist, start, settings);
+    }
+    let mut result = solve_with_ilp(dist, start, symmetric, settings, t0, lp_cuts_min_nodes)?;
     result.seconds = t0.elapsed().as_secs_f64();
     Ok(result)
 }
@@ -553,6 +610,9 @@ struct Var {
     v: usize,
     cost: f64,
     fixed: bool,
+    /// Fixed at 0: no tour through this edge is shorter than the best path known
+    /// ([`tighten_relaxation`]'s reduced-cost test).
+    banned: bool,
 }
 
 /// The variables of the open-path ILP and an index from node pairs to them.
@@ -572,25 +632,25 @@ impl Formulation {
         if symmetric {
             for (i, row) in dist.iter().enumerate() {
                 for (j, &cost) in row.iter().enumerate().skip(i + 1) {
-                    vars.push(Var { u: i, v: j, cost, fixed: false });
+                    vars.push(Var { u: i, v: j, cost, fixed: false, banned: false });
                 }
             }
             for j in 0..n {
-                vars.push(Var { u: j, v: dummy, cost: 0.0, fixed: j == start });
+                vars.push(Var { u: j, v: dummy, cost: 0.0, fixed: j == start, banned: false });
             }
         } else {
             // Nothing enters the start but the dummy; the dummy leaves only to the start.
             for (i, row) in dist.iter().enumerate() {
                 for (j, &cost) in row.iter().enumerate() {
                     if i != j && j != start {
-                        vars.push(Var { u: i, v: j, cost, fixed: false });
+                        vars.push(Var { u: i, v: j, cost, fixed: false, banned: false });
                     }
                 }
             }
             for j in (0..n).filter(|&j| j != start) {
-                vars.push(Var { u: j, v: dummy, cost: 0.0, fixed: false });
+                vars.push(Var { u: j, v: dummy, cost: 0.0, fixed: false, banned: false });
             }
-            vars.push(Var { u: dummy, v: start, cost: 0.0, fixed: true });
+            vars.push(Var { u: dummy, v: start, cost: 0.0, fixed: true, banned: false });
         }
         let n_nodes = n + 1;
         let mut index = vec![None; n_nodes * n_nodes];
@@ -709,6 +769,33 @@ fn run_highs(
     warm: &[f64],
     time_limit: f64,
 ) -> Result<IlpRun, String> {
+    let (model, cols) = build_model(form, cuts, true, time_limit)?;
+    let mut model = model;
+    // The warm start only helps pruning; a rejected one is harmless.
+    let _ = model.try_set_solution(Some(warm), None, None, None);
+    let solved = model.try_solve().map_err(|s| format!("HiGHS run failed: {s:?}"))?;
+    debug_assert_eq!(cols, form.vars.len());
+    let chosen = (solved.primal_solution_status() == HighsSolutionStatus::Feasible).then(|| {
+        let values = solved.get_solution();
+        values.columns().iter().enumerate().filter(|(_, &x)| x > 0.5).map(|(k, _)| k).collect()
+    });
+    Ok(IlpRun {
+        status: solved.status(),
+        chosen,
+        objective: solved.objective_value(),
+        dual_bound: solved.double_info_value(c"mip_dual_bound").ok().filter(|b| b.is_finite()),
+    })
+}
+
+/// The HiGHS model of `form` with the subtour constraints of `cuts`: 0/1 variables when
+/// `integer`, else its LP relaxation (0 ≤ x ≤ 1); one thread, fixed seed, zero MIP gaps,
+/// `time_limit` seconds. Returns the model and its number of columns.
+fn build_model(
+    form: &Formulation,
+    cuts: &[Vec<usize>],
+    integer: bool,
+    time_limit: f64,
+) -> Result<(highs::Model, usize), String> {
     let nn = form.n_nodes;
     let mut pb = RowProblem::default();
     let cols: Vec<Col> = form
@@ -716,7 +803,8 @@ fn run_highs(
         .iter()
         .map(|var| {
             let low = if var.fixed { 1.0 } else { 0.0 };
-            pb.add_integer_column(var.cost, low..=1.0)
+            let high = if var.banned { 0.0 } else { 1.0 };
+            pb.add_column_with_integrality(var.cost, low..=high, integer)
         })
         .collect();
     if form.symmetric {
@@ -766,27 +854,18 @@ fn run_highs(
     ] {
         r.map_err(|e| format!("HiGHS option {name}: {e:?}"))?;
     }
-    // The warm start only helps pruning; a rejected one is harmless.
-    let _ = model.try_set_solution(Some(warm), None, None, None);
-    let solved = model.try_solve().map_err(|s| format!("HiGHS run failed: {s:?}"))?;
-    let chosen = (solved.primal_solution_status() == HighsSolutionStatus::Feasible).then(|| {
-        let values = solved.get_solution();
-        values.columns().iter().enumerate().filter(|(_, &x)| x > 0.5).map(|(k, _)| k).collect()
-    });
-    Ok(IlpRun {
-        status: solved.status(),
-        chosen,
-        objective: solved.objective_value(),
-        dual_bound: solved.double_info_value(c"mip_dual_bound").ok().filter(|b| b.is_finite()),
-    })
+    Ok((model, cols.len()))
 }
 
+/// The ILP stage; symmetric instances of at least `lp_cuts_min_nodes` nodes start with the LP
+/// stage ([`tighten_relaxation`], [`lp_guided_path`], [`ban_by_reduced_costs`]).
 fn solve_with_ilp(
     dist: &[Vec<f64>],
     start: usize,
     symmetric: bool,
     settings: &TspSettings,
     t0: Instant,
+    lp_cuts_min_nodes: usize,
 ) -> Result<TspResult, TspError> {
     let n = dist.len();
     let solver_error = |message: String| TspError::Solver { n, message };
@@ -797,10 +876,31 @@ fn solve_with_ilp(
     let mut best_len = open_path_length(dist, &best);
     let heuristic_length = best_len;
     let mut lower = trivial_lower_bound(dist, start);
-    let form = Formulation::new(dist, start, symmetric);
+    let mut form = Formulation::new(dist, start, symmetric);
     let mut cuts: Vec<Vec<usize>> = Vec::new();
     let mut solves = 0;
     let mut optimal = proven(best_len, lower);
+    let mut lp_solves = 0;
+    let mut fixing: Option<LpSolution> = None;
+    if symmetric && n >= lp_cuts_min_nodes && !optimal {
+        let (solves, lp) = tighten_relaxation(&form, &mut cuts, &remaining).map_err(solver_error)?;
+        lp_solves = solves;
+        if let Some(lp) = lp {
+            // A path read off the LP solution, improved by the local search: usually much
+            // closer to the optimum than the nearest-neighbour start, so the fixing below
+            // removes more edges.
+            let guided = lp_guided_path(&form, dist, start, &lp.values);
+            let guided_len = open_path_length(dist, &guided);
+            if guided_len < best_len {
+                best = guided;
+                best_len = guided_len;
+            }
+            lower = lower.max(lp.value);
+            optimal = proven(best_len, lower);
+            ban_by_reduced_costs(&mut form, &lp, best_len);
+            fixing = Some(lp);
+        }
+    }
 
     while !optimal {
         let limit = remaining();
@@ -808,6 +908,9 @@ fn solve_with_ilp(
             break;
         }
         let warm = form.values_of(&best);
+        if let Some(lp) = &fixing {
+            ban_by_reduced_costs(&mut form, lp, best_len);
+        }
         let run = run_highs(&form, &cuts, &warm, limit).map_err(solver_error)?;
         solves += 1;
         let stopped = match run.status {
@@ -879,7 +982,256 @@ fn solve_with_ilp(
         seconds: 0.0,
         ilp_solves: solves,
         cuts: cuts.len(),
+        lp_solves,
     })
+}
+
+/// The LP stage of symmetric instances: solves the LP relaxation (degree constraints and
+/// `cuts`), adds every subtour constraint the solution violates ([`violated_subtours`]) and
+/// solves again, until none is violated (the relaxation then holds every subtour constraint:
+/// the Held–Karp bound), the time is up or [`MAX_LP_ROUNDS`] rounds have run. Returns the number
+/// of LP solves.
+///
+/// Exact: subtour constraints hold for every tour, so the integer program afterwards has the
+/// same optimum; they only make its relaxation, and so its branch and bound, tighter. With
+/// them the integer loop needs a solve or two where it needed up to a dozen, each a branch and
+/// bound of its own.
+fn tighten_relaxation(
+    form: &Formulation,
+    cuts: &mut Vec<Vec<usize>>,
+    remaining: &dyn Fn() -> f64,
+) -> Result<(usize, Option<LpSolution>), String> {
+    let mut solves = 0;
+    let mut last = None;
+    let mut known: std::collections::HashSet<Vec<usize>> = cuts.iter().map(|c| sorted(c)).collect();
+    for _ in 0..MAX_LP_ROUNDS {
+        let limit = remaining();
+        if limit <= 0.0 {
+            break;
+        }
+        let (model, _) = build_model(form, cuts, false, limit)?;
+        let solved = model.try_solve().map_err(|s| format!("HiGHS LP run failed: {s:?}"))?;
+        solves += 1;
+        match solved.status() {
+            HighsModelStatus::Optimal => {}
+            // Out of time: the integer loop decides what to do with the time left.
+            HighsModelStatus::ReachedTimeLimit => break,
+            other => return Err(format!("HiGHS LP status {other:?}")),
+        }
+        let solution = solved.get_solution();
+        let x = solution.columns().to_vec();
+        last = Some(LpSolution {
+            values: x.clone(),
+            value: solved.objective_value(),
+            reduced_costs: solution.dual_columns().to_vec(),
+        });
+        let mut added = false;
+        for set in violated_subtours(form, &x) {
+            if known.insert(set.clone()) {
+                cuts.push(set);
+                added = true;
+            }
+        }
+        if !added {
+            break;
+        }
+    }
+    Ok((solves, last))
+}
+
+/// A path guided by the LP solution `x` of the edge formulation `form` of the symmetric `dist`:
+/// the greedy edge heuristic over the edges by decreasing LP value (then increasing cost, then
+/// node pair; the fixed edge {dummy, start} first) — an edge joins two fragments' ends — closed
+/// into a tour through the dummy, read from `start` away from the dummy, then improved by the
+/// local search. Deterministic.
+fn lp_guided_path(form: &Formulation, dist: &[Vec<f64>], start: usize, x: &[f64]) -> Vec<usize> {
+    let nn = form.n_nodes;
+    let dummy = nn - 1;
+    let mut edges: Vec<usize> = (0..form.vars.len()).collect();
+    edges.sort_by(|&a, &b| {
+        let (va, vb) = (&form.vars[a], &form.vars[b]);
+        vb.fixed
+            .cmp(&va.fixed)
+            .then(x[b].total_cmp(&x[a]))
+            .then(va.cost.total_cmp(&vb.cost))
+            .then((va.u, va.v).cmp(&(vb.u, vb.v)))
+    });
+    let mut parent: Vec<usize> = (0..nn).collect();
+    fn find(parent: &mut [usize], mut v: usize) -> usize {
+        while parent[v] != v {
+            parent[v] = parent[parent[v]];
+            v = parent[v];
+        }
+        v
+    }
+    let mut adj: Vec<Vec<usize>> = vec![Vec::new(); nn];
+    let mut added = 0;
+    for k in edges {
+        if added + 1 == nn {
+            break;
+        }
+        let Var { u, v, .. } = form.vars[k];
+        if adj[u].len() == 2 || adj[v].len() == 2 {
+            continue;
+        }
+        let (ru, rv) = (find(&mut parent, u), find(&mut parent, v));
+        if ru == rv {
+            continue;
+        }
+        parent[ru] = rv;
+        adj[u].push(v);
+        adj[v].push(u);
+        added += 1;
+    }
+    // One Hamiltonian path over the nodes and the dummy (the graph is complete): its two ends
+    // close the tour.
+    let ends: Vec<usize> = (0..nn).filter(|&v| adj[v].len() < 2).collect();
+    if let [a, b] = ends[..] {
+        adj[a].push(b);
+        adj[b].push(a);
+    }
+    let mut order = Vec::with_capacity(nn - 1);
+    let (mut prev, mut cur) = (dummy, start);
+    while cur != dummy && order.len() < nn {
+        order.push(cur);
+        let next = if adj[cur][0] == prev { adj[cur][1] } else { adj[cur][0] };
+        prev = cur;
+        cur = next;
+    }
+    debug_assert_eq!(order.len(), nn - 1);
+    local_search(dist, &mut order);
+    order
+}
+
+/// Reduced-cost fixing: a tour through edge e is at least the LP optimum + e's reduced cost
+/// long (LP duality); above `best_len`, the length of a path known (with the wide margin
+/// [`FIX_MARGIN`] for the LP's tolerances), no shortest path uses e, which is fixed at 0.
+fn ban_by_reduced_costs(form: &mut Formulation, lp: &LpSolution, best_len: f64) {
+    let slack = best_len - lp.value + FIX_MARGIN * best_len.abs().max(1.0);
+    for (var, &rc) in form.vars.iter_mut().zip(&lp.reduced_costs) {
+        if !var.fixed && rc > slack {
+            var.banned = true;
+        }
+    }
+}
+
+/// The last optimal LP of [`tighten_relaxation`]: its value (a lower bound) and the reduced
+/// cost of every variable.
+struct LpSolution {
+    values: Vec<f64>,
+    value: f64,
+    reduced_costs: Vec<f64>,
+}
+
+fn sorted(set: &[usize]) -> Vec<usize> {
+    let mut s = set.to_vec();
+    s.sort_unstable();
+    s
+}
+
+/// Node sets (sorted; the smaller side of each cut) whose subtour constraint the LP solution `x`
+/// of the edge formulation `form` violates by more than [`CUT_EPS`] / 2: the connected
+/// components of its support when there are several, otherwise the cuts of the phases of a
+/// Stoer–Wagner minimum cut whose weight is below 2 − [`CUT_EPS`] (x(E(S)) ≤ |S| − 1 is
+/// x(δ(S)) ≥ 2 under the degree constraints). Empty when no subtour constraint is violated:
+/// the minimum cut is among the phase cuts.
+fn violated_subtours(form: &Formulation, x: &[f64]) -> Vec<Vec<usize>> {
+    let nn = form.n_nodes;
+    let mut w = vec![0.0f64; nn * nn];
+    for (var, &value) in form.vars.iter().zip(x) {
+        if value > 0.0 {
+            w[var.u * nn + var.v] += value;
+            w[var.v * nn + var.u] += value;
+        }
+    }
+    let smaller_side = |set: Vec<usize>| -> Vec<usize> {
+        if 2 * set.len() <= nn {
+            sorted(&set)
+        } else {
+            let mut inside = vec![false; nn];
+            set.iter().for_each(|&v| inside[v] = true);
+            (0..nn).filter(|&v| !inside[v]).collect()
+        }
+    };
+    let proper = |set: &Vec<usize>| set.len() >= 2 && set.len() <= nn - 2;
+    // Components of the support (edges above CUT_EPS).
+    let mut comp = vec![usize::MAX; nn];
+    let mut comps: Vec<Vec<usize>> = Vec::new();
+    for root in 0..nn {
+        if comp[root] != usize::MAX {
+            continue;
+        }
+        let id = comps.len();
+        let mut members = vec![root];
+        comp[root] = id;
+        let mut k = 0;
+        while k < members.len() {
+            let u = members[k];
+            k += 1;
+            for v in 0..nn {
+                if comp[v] == usize::MAX && w[u * nn + v] > CUT_EPS {
+                    comp[v] = id;
+                    members.push(v);
+                }
+            }
+        }
+        comps.push(members);
+    }
+    if comps.len() > 1 {
+        let mut out: Vec<Vec<usize>> = comps.into_iter().map(smaller_side).filter(proper).collect();
+        out.sort();
+        out.dedup();
+        return out;
+    }
+    // Stoer–Wagner: every phase's cut (the last node's group against the rest).
+    let mut groups: Vec<Vec<usize>> = (0..nn).map(|v| vec![v]).collect();
+    let mut active: Vec<usize> = (0..nn).collect();
+    let mut out = Vec::new();
+    let mut key = vec![0.0f64; nn];
+    let mut added = vec![false; nn];
+    while active.len() > 1 {
+        for &v in &active {
+            key[v] = 0.0;
+            added[v] = false;
+        }
+        let (mut last, mut before_last) = (usize::MAX, usize::MAX);
+        for _ in 0..active.len() {
+            // The most tightly connected node not yet added (ties: the first in `active`).
+            let mut best = usize::MAX;
+            for &v in &active {
+                if !added[v] && (best == usize::MAX || key[v] > key[best]) {
+                    best = v;
+                }
+            }
+            added[best] = true;
+            before_last = last;
+            last = best;
+            for &u in &active {
+                if !added[u] {
+                    key[u] += w[best * nn + u];
+                }
+            }
+        }
+        if key[last] < 2.0 - CUT_EPS {
+            let set = smaller_side(groups[last].clone());
+            if proper(&set) {
+                out.push(set);
+            }
+        }
+        // Merge the last node into the one before it.
+        let moved = std::mem::take(&mut groups[last]);
+        groups[before_last].extend(moved);
+        for &u in &active {
+            let sum = w[before_last * nn + u] + w[last * nn + u];
+            w[before_last * nn + u] = sum;
+            w[u * nn + before_last] = sum;
+        }
+        w[before_last * nn + before_last] = 0.0;
+        active.retain(|&v| v != last);
+    }
+    out.sort();
+    out.dedup();
+    out
 }
 
 #[cfg(test)]
@@ -1032,6 +1384,7 @@ mod tests {
                     seconds: 0.0,
                     ilp_solves: 0,
                     cuts: 0,
+                    lp_solves: 0,
                 };
                 check_valid(&dist, start, &r);
                 let nn = nearest_neighbour(&dist, start);
@@ -1088,6 +1441,149 @@ mod tests {
                 assert!(ilp.ilp_solves >= 1);
                 assert!(ilp.length <= ilp.heuristic_length.unwrap());
             }
+        }
+    }
+
+    /// The LP stage (`lp_cuts_min_nodes` = 0) against the DP on 10–14 nodes and against the
+    /// plain integer loop on 50–70 nodes: the same shortest length, and tours that use only
+    /// edges the reduced-cost fixing left.
+    #[test]
+    fn lp_stage_keeps_the_shortest_length() {
+        let mut rng = ChaCha8Rng::seed_from_u64(48);
+        let solve = |dist: &[Vec<f64>], start: usize, lp_min: usize| {
+            let r =
+                solve_with_ilp(dist, start, is_symmetric(dist), &ilp_only(), Instant::now(), lp_min).unwrap();
+            check_valid(dist, start, &r);
+            assert!(r.optimal);
+            r
+        };
+        for n in 10..=14usize {
+            for rep in 0..2 {
+                let dist =
+                    if rep == 0 { sphere_instance(n, &mut rng) } else { euclidean_instance(n, &mut rng) };
+                let start = rng.gen_range(0..n);
+                let dp = shortest_open_path(&dist, start, &dp_only()).unwrap();
+                let lp = solve(&dist, start, 0);
+                assert!(close(dp.length, lp.length), "n={n}: dp {} vs lp stage {}", dp.length, lp.length);
+            }
+        }
+        let mut staged = 0;
+        for n in [50usize, 60, 70] {
+            let dist = sphere_instance(n, &mut rng);
+            let start = rng.gen_range(0..n);
+            let plain = solve(&dist, start, usize::MAX);
+            let lp = solve(&dist, start, 0);
+            assert_eq!(plain.lp_solves, 0);
+            staged += lp.lp_solves;
+            assert!(
+                close(plain.length, lp.length),
+                "n={n}: plain {} vs lp stage {}",
+                plain.length,
+                lp.length
+            );
+        }
+        assert!(staged >= 3, "the LP stage ran");
+    }
+
+    /// The phase cuts of `violated_subtours` against brute force over every node set, on random
+    /// supports of 5–9 nodes (through a formulation of that many nodes, dummy included): a set
+    /// is reported only if its cut is below 2, and when some cut is below 2 the smallest one's
+    /// weight is reported; disconnected supports report their components.
+    #[test]
+    fn violated_subtours_find_the_cuts_below_two() {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        for case in 0..300 {
+            let n = rng.gen_range(4..=8usize); // nodes; the formulation adds the dummy
+            let dist = sphere_instance(n, &mut rng);
+            let form = Formulation::new(&dist, 0, true);
+            let nn = form.n_nodes;
+            let x: Vec<f64> = form
+                .vars
+                .iter()
+                .map(|_| if rng.gen_bool(0.5) { 0.0 } else { [0.25, 0.5, 1.0][rng.gen_range(0..3)] })
+                .collect();
+            let cut_weight = |set: &[usize]| -> f64 {
+                let mut inside = vec![false; nn];
+                set.iter().for_each(|&v| inside[v] = true);
+                form.vars.iter().zip(&x).filter(|(v, _)| inside[v.u] != inside[v.v]).map(|(_, &w)| w).sum()
+            };
+            let found = violated_subtours(&form, &x);
+            for set in &found {
+                assert!(set.len() >= 2 && set.len() <= nn - 2, "case {case}: improper set {set:?}");
+                assert!(cut_weight(set) < 2.0 - CUT_EPS, "case {case}: {set:?} has cut {}", cut_weight(set));
+            }
+            // Brute force: the lightest proper cut.
+            let mut lightest = f64::INFINITY;
+            for mask in 1u32..(1 << nn) - 1 {
+                let set: Vec<usize> = (0..nn).filter(|&v| mask >> v & 1 == 1).collect();
+                if set.len() >= 2 && set.len() <= nn - 2 {
+                    lightest = lightest.min(cut_weight(&set));
+                }
+            }
+            // The support's components (by brute-force closure).
+            let mut comp: Vec<usize> = (0..nn).collect();
+            for _ in 0..nn {
+                for (var, &w) in form.vars.iter().zip(&x) {
+                    if w > CUT_EPS {
+                        let m = comp[var.u].min(comp[var.v]);
+                        comp[var.u] = m;
+                        comp[var.v] = m;
+                    }
+                }
+            }
+            let mut roots = comp.clone();
+            roots.sort_unstable();
+            roots.dedup();
+            if roots.len() == 1 {
+                // The global minimum cut is one of the phase cuts; singletons aside (a node's own
+                // cut below 2 is a degree violation, not a subtour), it is reported when below 2.
+                let min_reported = found.iter().map(|s| cut_weight(s)).fold(f64::INFINITY, f64::min);
+                let singles = (0..nn).map(|v| cut_weight(&[v])).fold(f64::INFINITY, f64::min);
+                if lightest < 2.0 - CUT_EPS && lightest < singles {
+                    assert!(
+                        (min_reported - lightest).abs() < 1e-9,
+                        "case {case}: lightest proper cut {lightest}, reported {min_reported}"
+                    );
+                }
+            } else {
+                // Every proper component (or its complement, the smaller side) is reported.
+                for r in roots {
+                    let c: Vec<usize> = (0..nn).filter(|&v| comp[v] == r).collect();
+                    let side =
+                        if 2 * c.len() <= nn { c } else { (0..nn).filter(|&v| comp[v] != r).collect() };
+                    if side.len() >= 2 && side.len() <= nn - 2 {
+                        assert!(found.contains(&side), "case {case}: component {side:?} not in {found:?}");
+                    }
+                }
+            }
+        }
+        // A tour's support violates nothing; two triangles do.
+        let dist = sphere_instance(5, &mut rng);
+        let form = Formulation::new(&dist, 0, true);
+        let on = |pairs: &[(usize, usize)]| -> Vec<f64> {
+            form.vars.iter().map(|v| if pairs.contains(&(v.u, v.v)) { 1.0 } else { 0.0 }).collect()
+        };
+        // Nodes 0..5 and the dummy 5: the tour 0-1-2-3-4-5-0.
+        let tour = on(&[(0, 1), (1, 2), (2, 3), (3, 4), (4, 5), (0, 5)]);
+        assert!(violated_subtours(&form, &tour).is_empty());
+        let triangles = on(&[(0, 1), (1, 2), (0, 2), (3, 4), (4, 5), (3, 5)]);
+        assert_eq!(violated_subtours(&form, &triangles), vec![vec![0, 1, 2], vec![3, 4, 5]]);
+    }
+
+    /// The LP-guided path is a path over every node from the start, whatever the LP values.
+    #[test]
+    fn lp_guided_path_is_a_valid_path() {
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        for n in [3usize, 4, 10, 30] {
+            let dist = sphere_instance(n, &mut rng);
+            let start = rng.gen_range(0..n);
+            let form = Formulation::new(&dist, start, true);
+            let x: Vec<f64> = form.vars.iter().map(|_| rng.gen_range(0.0..1.0)).collect();
+            let path = lp_guided_path(&form, &dist, start, &x);
+            assert_eq!(path[0], start);
+            let mut s = path.clone();
+            s.sort_unstable();
+            assert_eq!(s, (0..n).collect::<Vec<_>>());
         }
     }
 

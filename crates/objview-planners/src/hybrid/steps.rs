@@ -243,6 +243,11 @@ impl PlanningSets {
         if self.occluders.is_empty() {
             return vec![Vec::new(); poses.len()];
         }
+        if self.target_len == 0 {
+            // Nothing to see (the identity backend, or a prediction inside the observed
+            // voxels): every cover is empty, without casting the 360 views.
+            return vec![vec![0u64; words]; poses.len()];
+        }
         let caster = InverseCaster::with_max_range(&self.occluders, DEFAULT_MAX_RANGE);
         poses
             .par_iter()
@@ -379,5 +384,11 @@ mod tests {
         assert_eq!(keys(&covers[1]), vec![[-4, 0, 0]]);
         assert_eq!(keys(&covers[2]), vec![[-4, 0, 0], [4, 0, 0]]);
         assert!(keys(&covers[3]).is_empty(), "an inactive pose covers nothing");
+        // No target (the prediction inside the observed voxels): empty covers of full length.
+        let none = PlanningSets::new(&observed, &[[0, 0, 0], [1, 0, 0]]);
+        assert_eq!(none.target_len, 0);
+        let covers = none.covers(&poses, &[true; 4], Intrinsics::default());
+        assert_eq!(covers, vec![vec![0u64; none.target.len()]; 4]);
+        assert_eq!(none.target.len(), none.occluders.len().div_ceil(64));
     }
 }

@@ -265,6 +265,18 @@ pub fn shortest_open_path(
     start: usize,
     settings: &TspSettings,
 ) -> Result<TspResult, TspError> {
+    shortest_open_path_with_lp_stage_from(dist, start, settings, LP_CUTS_MIN_NODES)
+}
+
+/// [`shortest_open_path`] with the LP stage's node threshold chosen (`usize::MAX`: the integer
+/// loop alone, as below [`LP_CUTS_MIN_NODES`]) — for benchmarks and tests that compare the two
+/// on the same instances.
+pub fn shortest_open_path_with_lp_stage_from(
+    dist: &[Vec<f64>],
+    start: usize,
+    settings: &TspSettings,
+    lp_cuts_min_nodes: usize,
+) -> Result<TspResult, TspError> {
     settings.validate()?;
     validate_matrix(dist, start)?;
     let t0 = Instant::now();
@@ -287,30 +299,8 @@ pub fn shortest_open_path(
             lp_solves: 0,
         }
     } else {
-        solve_with_ilp(dist, start, symmetric, settings, t0, LP_CUTS_MIN_NODES)?
+        solve_with_ilp(dist, start, symmetric, settings, t0, lp_cuts_min_nodes)?
     };
-    result.seconds = t0.elapsed().as_secs_f64();
-    Ok(result)
-}
-
-/// [`shortest_open_path`] with the LP stage's node threshold chosen (`usize::MAX`: the integer
-/// loop alone, as below [`LP_CUTS_MIN_NODES`]) — for benchmarks and tests that compare the two
-/// on the same instances.
-pub fn shortest_open_path_with_lp_stage_from(
-    dist: &[Vec<f64>],
-    start: usize,
-    settings: &TspSettings,
-    lp_cuts_min_nodes: usize,
-) -> Result<TspResult, TspError> {
-    settings.validate()?;
-    validate_matrix(dist, start)?;
-    let t0 = Instant::now();
-    let n = dist.len();
-    let symmetric = is_symmetric(dist);
-    if n <= 2 || n <= settings.dp_max_nodes {
-        return shortest_open_path(dist, start, settings);
-    }
-    let mut result = solve_with_ilp(dist, start, symmetric, settings, t0, lp_cuts_min_nodes)?;
     result.seconds = t0.elapsed().as_secs_f64();
     Ok(result)
 }

@@ -1473,6 +1473,31 @@ mod tests {
             );
         }
         assert!(staged >= 3, "the LP stage ran");
+        // Degenerate symmetric costs (integers 1–3: many ties, many optimal paths) and duplicated
+        // points (zero distances).
+        for rep in 0..2 {
+            let n = 50;
+            let dist: Vec<Vec<f64>> = if rep == 0 {
+                let upper: Vec<Vec<f64>> = (0..n)
+                    .map(|i| (0..n).map(|j| if j > i { rng.gen_range(1..=3) as f64 } else { 0.0 }).collect())
+                    .collect();
+                (0..n)
+                    .map(|i| (0..n).map(|j| if j > i { upper[i][j] } else { upper[j][i] }).collect())
+                    .collect()
+            } else {
+                let p = sphere_points(n / 2, 3.0, &mut rng);
+                let doubled: Vec<[f64; 3]> = p.iter().chain(&p).copied().collect();
+                shell_matrix(&doubled)
+            };
+            let plain = solve(&dist, 0, usize::MAX);
+            let lp = solve(&dist, 0, 0);
+            assert!(
+                close(plain.length, lp.length),
+                "rep {rep}: plain {} vs lp stage {}",
+                plain.length,
+                lp.length
+            );
+        }
     }
 
     /// The phase cuts of `violated_subtours` against brute force over every node set, on random

@@ -59,13 +59,19 @@ fn main() {
             .unwrap();
             let info = p.last_plan().expect("a plan was made");
             println!(
-                "{:<26} budget {:<4}: plan {:.3} s (completion {:.3}, steps+ILP {:.3}); {} completed pts, {} target / {} occluder voxels, \
+                "{:<26} budget {:<4}: plan {:.3} s (completion {:.3}, steps {:.3}, selection {:.3}, path {:.3} over {} nodes); \
+                 {} completed pts, {} target / {} occluder voxels, \
                  {} columns, ILP {} ({} chosen, bound {}, gap {}, {:.3} s), {} filled, {} views, NSC@0.02 {:.4}, {}",
                 r.method,
                 budget.to_string(),
                 info.plan_seconds,
                 info.completion_seconds,
-                info.steps_seconds,
+                // The steps (outlier removal, voxels, the 360 covers) are what the plan's
+                // "steps" time holds besides the selection.
+                info.steps_seconds - info.selection.seconds,
+                info.selection.seconds,
+                info.tsp.as_ref().map_or(0.0, |t| t.seconds),
+                info.tsp.as_ref().map_or(0, |t| t.order.len()),
                 info.completed_points,
                 info.target_voxels,
                 info.occluder_voxels,

@@ -759,12 +759,10 @@ fn run_highs(
     warm: &[f64],
     time_limit: f64,
 ) -> Result<IlpRun, String> {
-    let (model, cols) = build_model(form, cuts, true, time_limit)?;
-    let mut model = model;
+    let mut model = build_model(form, cuts, true, time_limit)?;
     // The warm start only helps pruning; a rejected one is harmless.
     let _ = model.try_set_solution(Some(warm), None, None, None);
     let solved = model.try_solve().map_err(|s| format!("HiGHS run failed: {s:?}"))?;
-    debug_assert_eq!(cols, form.vars.len());
     let chosen = (solved.primal_solution_status() == HighsSolutionStatus::Feasible).then(|| {
         let values = solved.get_solution();
         values.columns().iter().enumerate().filter(|(_, &x)| x > 0.5).map(|(k, _)| k).collect()
@@ -779,13 +777,13 @@ fn run_highs(
 
 /// The HiGHS model of `form` with the subtour constraints of `cuts`: 0/1 variables when
 /// `integer`, else its LP relaxation (0 ≤ x ≤ 1); one thread, fixed seed, zero MIP gaps,
-/// `time_limit` seconds. Returns the model and its number of columns.
+/// `time_limit` seconds; its columns are `form.vars`, in order.
 fn build_model(
     form: &Formulation,
     cuts: &[Vec<usize>],
     integer: bool,
     time_limit: f64,
-) -> Result<(highs::Model, usize), String> {
+) -> Result<highs::Model, String> {
     let nn = form.n_nodes;
     let mut pb = RowProblem::default();
     let cols: Vec<Col> = form
@@ -844,7 +842,7 @@ fn build_model(
     ] {
         r.map_err(|e| format!("HiGHS option {name}: {e:?}"))?;
     }
-    Ok((model, cols.len()))
+    Ok(model)
 }
 
 /// The ILP stage; symmetric instances of at least `lp_cuts_min_nodes` nodes start with the LP
@@ -999,7 +997,7 @@ fn tighten_relaxation(
         if limit <= 0.0 {
             break;
         }
-        let (model, _) = build_model(form, cuts, false, limit)?;
+        let model = build_model(form, cuts, false, limit)?;
         let solved = model.try_solve().map_err(|s| format!("HiGHS LP run failed: {s:?}"))?;
         solves += 1;
         match solved.status() {
@@ -1009,19 +1007,19 @@ fn tighten_relaxation(
             other => return Err(format!("HiGHS LP status {other:?}")),
         }
         let solution = solved.get_solution();
-        let x = solution.columns().to_vec();
-        last = Some(LpSolution {
-            values: x.clone(),
+        let lp = LpSolution {
+            values: solution.columns().to_vec(),
             value: solved.objective_value(),
             reduced_costs: solution.dual_columns().to_vec(),
-        });
+        };
         let mut added = false;
-        for set in violated_subtours(form, &x) {
+        for set in violated_subtours(form, &lp.values) {
             if known.insert(set.clone()) {
                 cuts.push(set);
                 added = true;
             }
         }
+        last = Some(lp);
         if !added {
             break;
         }

@@ -240,12 +240,9 @@ impl PlanningSets {
     /// indices. Parallel over poses; result i belongs to `poses[i]`.
     pub fn covers(&self, poses: &[Pose], active: &[bool], intrinsics: Intrinsics) -> Vec<Vec<u64>> {
         let words = self.target.len();
-        if self.occluders.is_empty() {
-            return vec![Vec::new(); poses.len()];
-        }
         if self.target_len == 0 {
-            // Nothing to see (the identity backend, or a prediction inside the observed
-            // voxels): every cover is empty, without casting the 360 views.
+            // Nothing to see (no occluders, the identity backend, or a prediction inside the
+            // observed voxels): every cover is empty, without casting the 360 views.
             return vec![vec![0u64; words]; poses.len()];
         }
         let caster = InverseCaster::with_max_range(&self.occluders, DEFAULT_MAX_RANGE);

@@ -50,7 +50,7 @@
 
 use std::time::Instant;
 
-use highs::{ColProblem, HighsModelStatus, HighsSolutionStatus, Model, Row, Sense, SolvedModel};
+use highs::{ColProblem, HighsModelStatus, Model, Row, Sense};
 use serde::{Deserialize, Serialize};
 
 use crate::error::DifficultyError;
@@ -545,24 +545,21 @@ fn solve_ilp(
     settings: &CoverSettings,
     time_limit: f64,
 ) -> IlpOutcome {
-    let failed = |message: String| IlpOutcome { status: Err(message), chosen: None, dual_bound: None };
-    let mut model = match build_model(matrix, n_rows, true, settings, time_limit) {
-        Ok(model) => model,
-        Err(message) => return failed(message),
+    let costs = vec![1.0; matrix.len()];
+    let run = match crate::warm::solve_from(
+        || build_model(matrix, n_rows, true, settings, time_limit),
+        start,
+        &costs,
+    ) {
+        Ok(run) => run,
+        Err(message) => return IlpOutcome { status: Err(message), chosen: None, dual_bound: None },
     };
-    // The warm start only helps pruning; a rejected one is harmless.
-    let _ = model.try_set_solution(Some(start), None, None, None);
-    let solved: SolvedModel = match model.try_solve() {
-        Ok(solved) => solved,
-        Err(s) => return failed(format!("HiGHS run failed: {s:?}")),
-    };
-    let chosen = (solved.primal_solution_status() == HighsSolutionStatus::Feasible).then(|| {
-        let values = solved.get_solution();
-        values.columns().iter().enumerate().filter(|(_, &x)| x > 0.5).map(|(c, _)| c).collect()
-    });
+    let chosen = run
+        .columns
+        .map(|values| values.iter().enumerate().filter(|(_, &x)| x > 0.5).map(|(c, _)| c).collect());
     IlpOutcome {
-        status: Ok(solved.status()),
+        status: Ok(run.solved.status()),
         chosen,
-        dual_bound: solved.double_info_value(c"mip_dual_bound").ok(),
+        dual_bound: run.solved.double_info_value(c"mip_dual_bound").ok(),
     }
 }

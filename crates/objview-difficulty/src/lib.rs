@@ -13,6 +13,8 @@
 //!   on the planning protocol's 128 views).
 //! - [`ilp`]: the exact d_plan — reductions, LP bound, the combinatorial search and the set-cover
 //!   ILP solved to proven optimality with HiGHS, with an honest time-limit status.
+//! - [`warm`]: HiGHS integer solves from a warm start whose returned solution is checked
+//!   against the reported objective (shared with the planners' exact solvers).
 //!
 //! Every constant is a named default collected in a settings struct that outputs record.
 
@@ -23,6 +25,7 @@ pub mod normal;
 pub mod saturation;
 pub mod search;
 pub mod setcover;
+pub mod warm;
 
 pub use error::DifficultyError;
 pub use grid::{SATURATION_GRID, SATURATION_N_MAX, SATURATION_N_MIN};

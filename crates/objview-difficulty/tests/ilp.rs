@@ -128,6 +128,40 @@ fn finds_the_optimum_where_greedy_is_suboptimal() {
 }
 
 #[test]
+fn the_ilp_alone_returns_its_optimum_not_its_warm_start() {
+    // The reduced set cover of a `completion-scp` plan on procedural pool 2: no reduction
+    // applies, the greedy cover has 7 views, the minimum 6 (= the LP bound). HiGHS, warm-started
+    // from the greedy cover, reports objective 6 but returns the 7 start views; taking those
+    // for the optimum made `--method ilp` report d_plan 7 (`objview_difficulty::warm`).
+    let lists: Vec<Vec<usize>> = vec![
+        vec![4, 13],
+        vec![6, 10, 13],
+        vec![3, 5],
+        vec![5, 10],
+        vec![2, 12],
+        vec![8, 9],
+        vec![1, 3, 11],
+        vec![0, 6, 7],
+        vec![5, 12],
+        vec![2, 10],
+        vec![9, 11],
+        vec![1, 9],
+        vec![8, 12],
+        vec![0, 13],
+        vec![4, 7],
+    ];
+    let views = bitsets(&lists);
+    let oracle = CoverInstance::from_bitsets(&views, 1).unwrap().brute_force().unwrap();
+    assert_eq!(oracle.len(), 6);
+    for method in [CoverMethod::Ilp, CoverMethod::Auto] {
+        let r = solve_min_cover(&views, &CoverSettings { method, ..settings(1) }).unwrap();
+        check_consistent(&views, 1, &r);
+        assert_eq!(r.greedy_size, 7);
+        assert_eq!((r.status.clone(), r.d_plan), (CoverStatus::Optimal, Some(6)), "{method}: {r:?}");
+    }
+}
+
+#[test]
 fn empty_input_and_everything_forced() {
     let r = solve_min_cover(&[], &settings(1)).unwrap();
     assert_eq!((r.universe, r.d_plan, r.best_size), (0, Some(0), 0));

@@ -55,7 +55,7 @@
 
 use std::time::Instant;
 
-use highs::{Col, HighsModelStatus, HighsSolutionStatus, RowProblem, Sense};
+use highs::{Col, HighsModelStatus, RowProblem, Sense};
 use serde::{Deserialize, Serialize};
 
 /// Default wall-clock limit of one solve, seconds.
@@ -759,19 +759,19 @@ fn run_highs(
     warm: &[f64],
     time_limit: f64,
 ) -> Result<IlpRun, String> {
-    let mut model = build_model(form, cuts, true, time_limit)?;
-    // The warm start only helps pruning; a rejected one is harmless.
-    let _ = model.try_set_solution(Some(warm), None, None, None);
-    let solved = model.try_solve().map_err(|s| format!("HiGHS run failed: {s:?}"))?;
-    let chosen = (solved.primal_solution_status() == HighsSolutionStatus::Feasible).then(|| {
-        let values = solved.get_solution();
-        values.columns().iter().enumerate().filter(|(_, &x)| x > 0.5).map(|(k, _)| k).collect()
-    });
+    let costs: Vec<f64> = form.vars.iter().map(|var| var.cost).collect();
+    // The warm start only helps pruning; the solution is HiGHS's own (checked against its
+    // objective: `objview_difficulty::warm`).
+    let run =
+        objview_difficulty::warm::solve_from(|| build_model(form, cuts, true, time_limit), warm, &costs)?;
+    let chosen = run
+        .columns
+        .map(|values| values.iter().enumerate().filter(|(_, &x)| x > 0.5).map(|(k, _)| k).collect());
     Ok(IlpRun {
-        status: solved.status(),
+        status: run.solved.status(),
         chosen,
-        objective: solved.objective_value(),
-        dual_bound: solved.double_info_value(c"mip_dual_bound").ok().filter(|b| b.is_finite()),
+        objective: run.solved.objective_value(),
+        dual_bound: run.solved.double_info_value(c"mip_dual_bound").ok().filter(|b| b.is_finite()),
     })
 }
 

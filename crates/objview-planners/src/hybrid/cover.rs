@@ -27,7 +27,7 @@
 use std::collections::HashMap;
 use std::time::Instant;
 
-use highs::{ColProblem, HighsModelStatus, HighsSolutionStatus, Sense};
+use highs::{ColProblem, HighsModelStatus, Sense};
 use objview_difficulty::ilp::{solve_min_cover, CoverSettings, CoverStatus};
 use serde::{Deserialize, Serialize};
 
@@ -375,31 +375,35 @@ fn solve_max_coverage(
     start: &[usize],
     time_limit_s: f64,
 ) -> Result<MaxCoverOutcome, String> {
-    let mut pb = ColProblem::new();
-    let budget_row = pb.add_row(..=budget as f64);
-    let group_rows: Vec<_> = weights.iter().map(|_| pb.add_row(..=0.0)).collect();
-    for col in cols {
-        let factors = std::iter::once((budget_row, 1.0)).chain(col.iter().map(|&g| (group_rows[g], -1.0)));
-        pb.add_integer_column(0.0, 0.0..=1.0, factors);
-    }
-    for (g, &w) in weights.iter().enumerate() {
-        pb.add_column(w, 0.0..=1.0, [(group_rows[g], 1.0)]);
-    }
-    let mut model =
-        pb.try_optimise(Sense::Maximise).map_err(|s| format!("HiGHS rejected the model: {s:?}"))?;
-    for (name, r) in [
-        ("output_flag", model.try_set_option("output_flag", false)),
-        ("log_to_console", model.try_set_option("log_to_console", false)),
-        ("threads", model.try_set_option("threads", 1)),
-        ("random_seed", model.try_set_option("random_seed", 0)),
-        ("time_limit", model.try_set_option("time_limit", time_limit_s)),
-        ("mip_rel_gap", model.try_set_option("mip_rel_gap", 0.0)),
-        ("mip_abs_gap", model.try_set_option("mip_abs_gap", 0.0)),
-    ] {
-        r.map_err(|e| format!("HiGHS option {name}: {e:?}"))?;
-    }
-    model.try_set_option("parallel", "off").map_err(|e| format!("HiGHS option parallel: {e:?}"))?;
-    // Warm start: the greedy selection and the groups it covers.
+    let build = || {
+        let mut pb = ColProblem::new();
+        let budget_row = pb.add_row(..=budget as f64);
+        let group_rows: Vec<_> = weights.iter().map(|_| pb.add_row(..=0.0)).collect();
+        for col in cols {
+            let factors =
+                std::iter::once((budget_row, 1.0)).chain(col.iter().map(|&g| (group_rows[g], -1.0)));
+            pb.add_integer_column(0.0, 0.0..=1.0, factors);
+        }
+        for (g, &w) in weights.iter().enumerate() {
+            pb.add_column(w, 0.0..=1.0, [(group_rows[g], 1.0)]);
+        }
+        let mut model =
+            pb.try_optimise(Sense::Maximise).map_err(|s| format!("HiGHS rejected the model: {s:?}"))?;
+        for (name, r) in [
+            ("output_flag", model.try_set_option("output_flag", false)),
+            ("log_to_console", model.try_set_option("log_to_console", false)),
+            ("threads", model.try_set_option("threads", 1)),
+            ("random_seed", model.try_set_option("random_seed", 0)),
+            ("time_limit", model.try_set_option("time_limit", time_limit_s)),
+            ("mip_rel_gap", model.try_set_option("mip_rel_gap", 0.0)),
+            ("mip_abs_gap", model.try_set_option("mip_abs_gap", 0.0)),
+        ] {
+            r.map_err(|e| format!("HiGHS option {name}: {e:?}"))?;
+        }
+        model.try_set_option("parallel", "off").map_err(|e| format!("HiGHS option parallel: {e:?}"))?;
+        Ok(model)
+    };
+    // Warm start: the given selection and the groups it covers.
     let mut x: Vec<f64> = (0..cols.len()).map(|i| if start.contains(&i) { 1.0 } else { 0.0 }).collect();
     let mut y = vec![0.0; weights.len()];
     for &i in start {
@@ -408,10 +412,11 @@ fn solve_max_coverage(
         }
     }
     x.extend(y);
-    let _ = model.try_set_solution(Some(&x), None, None, None);
-    let solved = model.try_solve().map_err(|s| format!("HiGHS run failed: {s:?}"))?;
-    let chosen = (solved.primal_solution_status() == HighsSolutionStatus::Feasible).then(|| {
-        solved.get_solution().columns()[..cols.len()]
+    let costs: Vec<f64> = std::iter::repeat_n(0.0, cols.len()).chain(weights.iter().copied()).collect();
+    // The solution is HiGHS's own (checked against its objective: `objview_difficulty::warm`).
+    let run = objview_difficulty::warm::solve_from(build, &x, &costs)?;
+    let chosen = run.columns.map(|values| {
+        values[..cols.len()]
             .iter()
             .enumerate()
             .filter(|(_, &v)| v > 0.5)
@@ -420,8 +425,8 @@ fn solve_max_coverage(
     });
     // A chosen set over budget would be a solver inconsistency: drop it (greedy is used).
     let chosen = chosen.filter(|c| c.len() <= budget);
-    let bound = solved.double_info_value(c"mip_dual_bound").ok().filter(|b| b.is_finite());
-    Ok((solved.status(), chosen, bound))
+    let bound = run.solved.double_info_value(c"mip_dual_bound").ok().filter(|b| b.is_finite());
+    Ok((run.solved.status(), chosen, bound))
 }
 
 /// Farthest-point fill: `count` times, the eligible position (in the given order, first wins

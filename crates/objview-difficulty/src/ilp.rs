@@ -554,12 +554,9 @@ fn solve_ilp(
         Ok(run) => run,
         Err(message) => return IlpOutcome { status: Err(message), chosen: None, dual_bound: None },
     };
-    let chosen = run
-        .columns
-        .map(|values| values.iter().enumerate().filter(|(_, &x)| x > 0.5).map(|(c, _)| c).collect());
     IlpOutcome {
         status: Ok(run.solved.status()),
-        chosen,
+        chosen: run.chosen(matrix.len()),
         dual_bound: run.solved.double_info_value(c"mip_dual_bound").ok(),
     }
 }

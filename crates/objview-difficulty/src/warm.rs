@@ -31,6 +31,15 @@ pub struct WarmSolve {
     pub restarted: bool,
 }
 
+impl WarmSolve {
+    /// The columns at 1 (value > 0.5) among the first `among` columns of the checked solution
+    /// (the 0/1 decision columns of a model that lists them first), when there is one.
+    pub fn chosen(&self, among: usize) -> Option<Vec<usize>> {
+        let values = self.columns.as_ref()?;
+        Some(values[..among].iter().enumerate().filter(|(_, &x)| x > 0.5).map(|(c, _)| c).collect())
+    }
+}
+
 /// The columns of `solved`'s solution, when feasible and consistent with its objective
 /// (Σ `costs` · x within [`OBJECTIVE_TOLERANCE`]).
 fn consistent_columns(solved: &SolvedModel, costs: &[f64]) -> Option<Vec<f64>> {
@@ -135,8 +144,7 @@ mod tests {
         let run = solve_from(cover_model, &start(), &costs).unwrap();
         assert_eq!(run.solved.status(), HighsModelStatus::Optimal);
         assert_eq!(run.solved.objective_value(), 6.0);
-        let columns = run.columns.expect("a checked solution");
-        let chosen: Vec<usize> = (0..VIEWS.len()).filter(|&c| columns[c] > 0.5).collect();
+        let chosen = run.chosen(VIEWS.len()).expect("a checked solution");
         assert_eq!(chosen.len(), 6, "{chosen:?}");
         let covered = chosen.iter().fold(0u32, |a, &c| VIEWS[c].iter().fold(a, |a, &r| a | 1 << r));
         assert_eq!(covered, (1 << 14) - 1);

@@ -764,12 +764,9 @@ fn run_highs(
     // objective: `objview_difficulty::warm`).
     let run =
         objview_difficulty::warm::solve_from(|| build_model(form, cuts, true, time_limit), warm, &costs)?;
-    let chosen = run
-        .columns
-        .map(|values| values.iter().enumerate().filter(|(_, &x)| x > 0.5).map(|(k, _)| k).collect());
     Ok(IlpRun {
         status: run.solved.status(),
-        chosen,
+        chosen: run.chosen(form.vars.len()),
         objective: run.solved.objective_value(),
         dual_bound: run.solved.double_info_value(c"mip_dual_bound").ok().filter(|b| b.is_finite()),
     })

@@ -415,14 +415,7 @@ fn solve_max_coverage(
     let costs: Vec<f64> = std::iter::repeat_n(0.0, cols.len()).chain(weights.iter().copied()).collect();
     // The solution is HiGHS's own (checked against its objective: `objview_difficulty::warm`).
     let run = objview_difficulty::warm::solve_from(build, &x, &costs)?;
-    let chosen = run.columns.map(|values| {
-        values[..cols.len()]
-            .iter()
-            .enumerate()
-            .filter(|(_, &v)| v > 0.5)
-            .map(|(i, _)| i)
-            .collect::<Vec<usize>>()
-    });
+    let chosen = run.chosen(cols.len());
     // A chosen set over budget would be a solver inconsistency: drop it (greedy is used).
     let chosen = chosen.filter(|c| c.len() <= budget);
     let bound = run.solved.double_info_value(c"mip_dual_bound").ok().filter(|b| b.is_finite());

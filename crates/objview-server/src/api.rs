@@ -239,14 +239,15 @@ pub fn list_query(query: Option<&str>) -> Result<(Option<EpisodeState>, Option<S
     Ok((state, method))
 }
 
-/// Runs engine work off the async executor once the engine gate lets it in.
+/// Runs engine work off the async executor, on an engine lane in its turn ([`crate::lanes`]).
 async fn engine<T: Send + 'static>(
     st: &Arc<AppState>,
     f: impl FnOnce() -> Result<T, ApiError> + Send + 'static,
 ) -> Result<T, ApiError> {
-    let _permit =
-        st.engine_gate.acquire().await.map_err(|e| ApiError::Internal(format!("engine gate: {e}")))?;
-    blocking(f).await
+    st.engine_lanes
+        .run(f)
+        .await
+        .unwrap_or_else(|e| Err(ApiError::Internal(format!("the request failed: {e}"))))
 }
 
 /// Runs blocking episode work off the async executor.
@@ -311,13 +312,13 @@ async fn create(State(st): State<Arc<AppState>>, c: Caller, Body(body): Body) ->
     // A full server answers at once, before any scene or engine work (the place itself is
     // taken inside `create`, under the same check).
     st.check_running(&c.owner)?;
-    // The prepared scene first, outside the engine gate: a scene being built (seconds, once per
-    // object) keeps no core's permit from the steps of running episodes, and concurrent creates
-    // of one object wait for that one build on the blocking pool, not in the gate's queue.
+    // The prepared scene first, outside the engine queue: a scene being built (seconds, once per
+    // object) keeps no engine lane from the steps of running episodes, and concurrent creates
+    // of one object wait for that one build on the blocking pool, not in the engine's queue.
     let (s2, spec2) = (st.clone(), spec.clone());
     let scene = blocking(move || s2.scene_for(&spec2)).await?;
-    let gate = st.clone();
-    let v = engine(&gate, move || st.create(&c.owner, spec, scene)).await?;
+    let queue = st.clone();
+    let v = engine(&queue, move || st.create(&c.owner, spec, scene)).await?;
     Ok((StatusCode::CREATED, Json(v)).into_response())
 }
 
@@ -343,8 +344,8 @@ async fn episode(
     let slot = slot_of(&st, &c, &id).await?;
     // Only a public split's info may need the engine (its running metrics).
     if st.pool.split(&slot.spec.split).is_some_and(|s| s.public) {
-        let gate = st.clone();
-        Ok(Json(engine(&gate, move || st.info(&slot)).await?))
+        let queue = st.clone();
+        Ok(Json(engine(&queue, move || st.info(&slot)).await?))
     } else {
         Ok(Json(blocking(move || st.info(&slot)).await?))
     }
@@ -400,8 +401,8 @@ async fn rgb(
 ) -> Result<Response, ApiError> {
     let want = step_query(&uri)?;
     let slot = slot_of(&st, &c, &id).await?;
-    let gate = st.clone();
-    let (step, png) = engine(&gate, move || {
+    let queue = st.clone();
+    let (step, png) = engine(&queue, move || {
         let (step, w, h, px) = st.rgb(&slot, want)?;
         let flat: Vec<u8> = px.iter().flat_map(|p| p.iter().copied()).collect();
         let img =
@@ -482,8 +483,8 @@ async fn act(
         None => return Err(ApiError::InvalidRequest("missing field `action`".into())),
     };
     let _in_flight = crate::state::InFlight::new(slot.clone());
-    let gate = st.clone();
-    let obs = engine(&gate, move || st.act(&slot, step, &action, received)).await?;
+    let queue = st.clone();
+    let obs = engine(&queue, move || st.act(&slot, step, &action, received)).await?;
     let mut h = HeaderMap::new();
     let ms = received.elapsed().as_secs_f64() * 1e3;
     if let Ok(v) = HeaderValue::from_str(&format!("handler;dur={ms:.3}")) {

@@ -17,8 +17,8 @@
 //! The settings record of result lines is `objview_runs::record` (shared with local runs).
 //! - [`load`] — the load generator of `objview bench serve`.
 //!
-//! Engine work (rendering, fusion, metrics) runs on tokio's blocking pool; the async side only
-//! parses, routes and waits.
+//! Engine work (rendering, fusion, metrics) waits in one queue for one of as many engine lanes
+//! as cores, each a thread of its own ([`lanes`]); the async side only parses, routes and waits.
 
 pub mod api;
 pub mod auth;
@@ -27,6 +27,7 @@ pub mod compress;
 pub mod conn;
 pub mod db;
 pub mod error;
+pub mod lanes;
 pub mod load;
 pub mod openapi;
 pub mod pool;

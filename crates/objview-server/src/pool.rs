@@ -222,8 +222,8 @@ impl SceneCache {
     }
 
     /// The scene of `obj` in the built-in view space `space` (blocking; call it off the async
-    /// executor, and outside the engine gate: a request waiting here for another's build must
-    /// not hold a core's permit). The error text may name files: do not send it to clients.
+    /// executor, and outside the engine queue: a request waiting here for another's build must
+    /// not hold an engine lane). The error text may name files: do not send it to clients.
     pub fn get(&self, obj: &ObjectRef, space: &str) -> Result<Arc<Scene>, String> {
         let key = (obj.uid.clone(), obj.mesh.clone(), obj.gt_cloud.clone(), space.to_string());
         let entry = self.touch(key);

@@ -28,6 +28,7 @@ use serde_json::{json, Value};
 use crate::auth::{Caller, Tokens};
 use crate::db::{ActionRow, Db, EpisodeRow};
 use crate::error::{ApiError, ServerError};
+use crate::lanes::Lanes;
 use crate::pool::{ObjectKey, Pool, SceneCache};
 use crate::protocol::{CANDIDATE_SETS, VIEW_SPACES};
 use crate::request::CreateSpec;
@@ -264,10 +265,10 @@ pub struct AppState {
     pub tokens: Option<Tokens>,
     /// Time limits.
     pub limits: Limits,
-    /// Engine work (starting episodes, applying actions, rendering on request) waits here for
-    /// one of as many permits as there are cores, first come first served, so that many clients
-    /// queue rather than slow every step down together.
-    pub engine_gate: tokio::sync::Semaphore,
+    /// Engine work (starting episodes, applying actions, rendering on request) waits here in
+    /// one queue, first come first served, for one of as many lanes as there are cores
+    /// ([`crate::lanes`]), so that many clients queue rather than slow every step down together.
+    pub engine_lanes: Lanes,
     /// The open connections (their count, evictions and refusals).
     pub connections: Arc<crate::conn::Registry>,
     candidate_sets: BTreeMap<String, Arc<Vec<Pose>>>,
@@ -335,15 +336,14 @@ impl AppState {
         }
         let spaces =
             VIEW_SPACES.iter().filter_map(|n| ViewSpace::builtin(n).map(|s| (n.to_string(), s))).collect();
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         let state = AppState {
             pool,
             scenes,
             db,
             tokens,
             limits,
-            engine_gate: tokio::sync::Semaphore::new(
-                std::thread::available_parallelism().map_or(1, |n| n.get()),
-            ),
+            engine_lanes: Lanes::new(cores)?,
             connections: Arc::default(),
             candidate_sets,
             spaces,
@@ -426,7 +426,7 @@ impl AppState {
     }
 
     /// The prepared scene of `spec`'s object and view space, from the scene cache (seconds the
-    /// first time, then a lookup). Blocking; the routes call it outside the engine gate.
+    /// first time, then a lookup). Blocking; the routes call it outside the engine queue.
     pub fn scene_for(&self, spec: &CreateSpec) -> Result<Arc<Scene>, ApiError> {
         let split = self
             .pool

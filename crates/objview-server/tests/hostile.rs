@@ -210,8 +210,7 @@ fn with_every_connection_busy_a_new_one_gets_503_and_the_busy_ones_finish() {
     let (s, _tmp) = start_with(|c| c.max_connections = 2);
     let addr = s.addr;
     // Hold the engine: creates wait inside their handler, so their connections are busy.
-    let permits = s.state.engine_gate.available_permits() as u32;
-    let gate = s.state.engine_gate.try_acquire_many(permits).expect("the engine gate");
+    let gate = s.state.engine_lanes.hold();
     let body = create_body("cube", "whole", json!("auto")).to_string();
     let request = format!(
         "POST /v1/episodes HTTP/1.1\r\nHost: objview\r\nContent-Type: application/json\r\n\

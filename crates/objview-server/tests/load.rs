@@ -40,6 +40,8 @@ fn eight_concurrent_clients_all_finish_fairly_on_one_shared_scene() {
     assert_eq!(r.server.samples, r.steps, "every action answer has its Server-Timing: {r:?}");
     assert_eq!(r.create.samples, r.episodes, "{r:?}");
     assert_eq!(r.depth.samples, r.steps, "{r:?}");
+    // Every create and step ran on an engine lane (one single-thread pool per core).
+    assert!(server.state.engine_lanes.jobs_run() >= r.episodes + r.steps, "{r:?}");
 
     // The first creates of all eight clients arrive together on a cold cache: one build, the
     // other requests wait for it and reuse it, as does every later episode.

@@ -107,10 +107,14 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
     };
     // In-process: the peak resident memory after the warm-up episode and after the run.
     let mut memory: Option<(u64, u64)> = None;
+    // This process's CPU time (user, system) before and after the timed run (set by both arms).
+    let cpu: Option<((f64, f64), (f64, f64))>;
     let (report, what, _server, _dir) = if let Some(url) = &a.url {
         cfg.url = url.clone();
         cfg.split = a.split.clone().context("--url needs --split")?;
+        let before = objview_runs::bench::process_cpu();
         let r = run_load(&cfg)?;
+        cpu = before.zip(objview_runs::bench::process_cpu());
         (r, format!("{url}, split {}, object {}", cfg.split, cfg.object), None, None)
     } else {
         let dir = tempfile::tempdir().context("temporary folder")?;
@@ -152,7 +156,9 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
         let warm = LoadConfig { clients: 1, episodes_per_client: 1, ..cfg.clone() };
         run_load(&warm)?;
         let warm_peak = objview_runs::bench::peak_rss();
+        let before = objview_runs::bench::process_cpu();
         let r = run_load(&cfg)?;
+        cpu = before.zip(objview_runs::bench::process_cpu());
         memory = warm_peak.zip(objview_runs::bench::peak_rss());
         let sc = server.state.scenes.stats();
         eprintln!("bench serve: scene cache: {} build(s), {} reuse(s), {} held", sc.builds, sc.hits, sc.held);
@@ -182,9 +188,19 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
         json!({"peak_rss_bytes": peak, "warm_peak_rss_bytes": warm, "concurrent_episodes": concurrent,
                "bytes_per_further_episode": per})
     });
+    let cpu_json = cpu.map(|((u0, s0), (u1, s1))| {
+        let (user, system) = (u1 - u0, s1 - s0);
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let busy = (user + system) / report.seconds.max(1e-9);
+        println!(
+            "  CPU of this process ({}) during the run: user {user:.2} s + system {system:.2} s = {busy:.2} of {cores} cores busy (system time is mostly the kernel zeroing fresh pages; on a VM its cost moves from run to run, and throughput with it)",
+            if a.url.is_some() { "the clients only" } else { "server and clients" }
+        );
+        json!({"user_seconds": user, "system_seconds": system, "cores_busy": busy, "cores": cores})
+    });
     if let Some(p) = &a.json {
-        let figures =
-            json!({"what": what, "depth_fetched": !a.no_depth, "report": report, "memory": memory_json});
+        let figures = json!({"what": what, "depth_fetched": !a.no_depth, "report": report, "memory": memory_json,
+                             "cpu": cpu_json});
         crate::bench::write_figures(p, figures, &host)?;
     }
     Ok(())

@@ -283,6 +283,18 @@ fn bench_serve_runs_concurrent_clients_against_an_in_process_server() {
         assert_eq!(m["concurrent_episodes"], 3);
         assert_eq!(m["bytes_per_further_episode"].as_f64().unwrap(), (peak - warm) as f64 / 2.0, "{m}");
     }
+    // CPU of the timed run: user and system seconds, and the cores that kept busy.
+    assert!(out.contains("CPU of this process (server and clients) during the run: user "), "{out}");
+    let c = &v["cpu"];
+    let (user, system, busy) = (
+        c["user_seconds"].as_f64().unwrap(),
+        c["system_seconds"].as_f64().unwrap(),
+        c["cores_busy"].as_f64().unwrap(),
+    );
+    assert!(user > 0.0 && system >= 0.0, "{c}");
+    let seconds = r["seconds"].as_f64().unwrap();
+    assert!((busy - (user + system) / seconds).abs() < 1e-9, "{c}");
+    assert_eq!(c["cores"].as_u64().unwrap(), v["host"]["logical_cpus"].as_u64().unwrap(), "{c}");
 }
 
 /// `GET /v1/health` on a fresh connection: whether a 200 came, and how long it took.

@@ -35,6 +35,20 @@ pub fn reset_peak_rss() -> bool {
     std::fs::write("/proc/self/clear_refs", "5").is_ok()
 }
 
+/// CPU time this process has used so far, all threads together: (user, system) seconds
+/// (`getrusage`). The system time of a load run is mostly the kernel zeroing pages on their
+/// first touch; on a VM its cost per page moves from run to run, so a run's throughput is read
+/// next to it.
+pub fn process_cpu() -> Option<(f64, f64)> {
+    // SAFETY: getrusage writes one `rusage` into the zeroed value it is given.
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut u) } != 0 {
+        return None;
+    }
+    let secs = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    Some((secs(u.ru_utime), secs(u.ru_stime)))
+}
+
 /// Memory per concurrent episode of a load run: the growth of the peak resident memory from
 /// a warm-up with one episode (`warm`, bytes) to the run with `concurrent` episodes at once
 /// (`peak`), per episode beyond the first; `None` with fewer than two episodes.
@@ -72,7 +86,7 @@ fn thread_pool(threads: usize) -> Result<rayon::ThreadPool, crate::RunError> {
 
 #[cfg(test)]
 mod tests {
-    use super::{memory_per_episode, Spread};
+    use super::{memory_per_episode, process_cpu, Spread};
 
     #[test]
     fn memory_per_episode_is_the_peak_growth_per_further_episode() {
@@ -82,6 +96,33 @@ mod tests {
         assert_eq!(memory_per_episode(300, 200, 2), Some(0.0));
         assert_eq!(memory_per_episode(100, 400, 1), None);
         assert_eq!(memory_per_episode(100, 400, 0), None);
+    }
+
+    #[test]
+    fn process_cpu_counts_this_threads_work_and_fresh_pages() {
+        let (u0, s0) = process_cpu().expect("getrusage");
+        // Busy work until the user time has grown by 30 ms (bounded by a 20 s wall limit).
+        let start = std::time::Instant::now();
+        let mut x = 1u64;
+        let u1 = loop {
+            for i in 0..100_000u64 {
+                x = x.wrapping_mul(6364136223846793005).wrapping_add(i);
+            }
+            let (u, _) = process_cpu().unwrap();
+            if u >= u0 + 0.03 || start.elapsed().as_secs() > 20 {
+                break u;
+            }
+        };
+        assert!(x != 0 || u1 > 0.0);
+        assert!(u1 >= u0 + 0.03, "user time {u0} → {u1} s after the busy loop");
+        // First touches of 256 MiB of fresh pages are system time.
+        let mut v = vec![0u8; 256 << 20];
+        for i in (0..v.len()).step_by(4096) {
+            v[i] = 1;
+        }
+        let (_, s1) = process_cpu().unwrap();
+        assert_eq!(v.iter().step_by(4096).filter(|&&b| b == 1).count(), 65536);
+        assert!(s1 > s0, "system time {s0} → {s1} s after touching 64k fresh pages");
     }
 
     #[test]

@@ -86,6 +86,16 @@ fn print(r: &LoadReport, what: &str) {
     );
 }
 
+/// This process's CPU time (user, system) before and after a run.
+type CpuSpan = Option<((f64, f64), (f64, f64))>;
+
+/// [`run_load`], and this process's CPU time around it.
+fn run_timed(cfg: &LoadConfig) -> Result<(LoadReport, CpuSpan)> {
+    let before = objview_runs::bench::process_cpu();
+    let r = run_load(cfg)?;
+    Ok((r, before.zip(objview_runs::bench::process_cpu())))
+}
+
 pub fn run(a: ServeBenchArgs) -> Result<()> {
     // Against `--url` this is the clients' machine; the server's may be another.
     let host = crate::bench::announce_host();
@@ -107,15 +117,11 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
     };
     // In-process: the peak resident memory after the warm-up episode and after the run.
     let mut memory: Option<(u64, u64)> = None;
-    // This process's CPU time (user, system) before and after the timed run (set by both arms).
-    let cpu: Option<((f64, f64), (f64, f64))>;
-    let (report, what, _server, _dir) = if let Some(url) = &a.url {
+    let (report, cpu, what, _server, _dir) = if let Some(url) = &a.url {
         cfg.url = url.clone();
         cfg.split = a.split.clone().context("--url needs --split")?;
-        let before = objview_runs::bench::process_cpu();
-        let r = run_load(&cfg)?;
-        cpu = before.zip(objview_runs::bench::process_cpu());
-        (r, format!("{url}, split {}, object {}", cfg.split, cfg.object), None, None)
+        let (r, cpu) = run_timed(&cfg)?;
+        (r, cpu, format!("{url}, split {}, object {}", cfg.split, cfg.object), None, None)
     } else {
         let dir = tempfile::tempdir().context("temporary folder")?;
         let obj = objview_geom::synth::find(&a.object)
@@ -156,9 +162,7 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
         let warm = LoadConfig { clients: 1, episodes_per_client: 1, ..cfg.clone() };
         run_load(&warm)?;
         let warm_peak = objview_runs::bench::peak_rss();
-        let before = objview_runs::bench::process_cpu();
-        let r = run_load(&cfg)?;
-        cpu = before.zip(objview_runs::bench::process_cpu());
+        let (r, cpu) = run_timed(&cfg)?;
         memory = warm_peak.zip(objview_runs::bench::peak_rss());
         let sc = server.state.scenes.stats();
         eprintln!("bench serve: scene cache: {} build(s), {} reuse(s), {} held", sc.builds, sc.hits, sc.held);
@@ -169,7 +173,7 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
             gt.len(),
             a.space
         );
-        (r, what, Some(server), Some(dir))
+        (r, cpu, what, Some(server), Some(dir))
     };
     print(&report, &what);
     let concurrent = a.clients.min(report.episodes);

@@ -30,17 +30,16 @@ type Job = Box<dyn FnOnce() + Send>;
 
 /// The queue and its lanes.
 pub struct Lanes {
-    queue: Mutex<Sender<Job>>,
-    count: usize,
+    queue: Sender<Job>,
     /// Jobs a lane ran (skipped ones not counted).
     ran: Arc<AtomicUsize>,
-    /// Kept so that the lanes' pools live as long as the queue.
-    _pools: Vec<rayon::ThreadPool>,
+    /// One single-thread pool per lane, kept as long as the queue.
+    pools: Vec<rayon::ThreadPool>,
 }
 
 impl std::fmt::Debug for Lanes {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Lanes").field("count", &self.count).finish_non_exhaustive()
+        f.debug_struct("Lanes").field("count", &self.count()).finish_non_exhaustive()
     }
 }
 
@@ -55,14 +54,13 @@ pub enum LaneError {
     Stopped,
 }
 
-/// Sets the flag when dropped, unless disarmed: marks a job whose request went away.
-struct Abandon(Arc<AtomicBool>, bool);
+/// Sets the flag when dropped: marks a job whose request went away. Dropped after the answer
+/// came, it changes nothing (the job has run, or is gone).
+struct Abandon(Arc<AtomicBool>);
 
 impl Drop for Abandon {
     fn drop(&mut self) {
-        if !self.1 {
-            self.0.store(true, Ordering::Relaxed);
-        }
+        self.0.store(true, Ordering::Relaxed);
     }
 }
 
@@ -86,12 +84,12 @@ impl Lanes {
                 Ok(pool)
             })
             .collect::<Result<Vec<_>, ServerError>>()?;
-        Ok(Lanes { queue: Mutex::new(tx), count, ran: Arc::default(), _pools: pools })
+        Ok(Lanes { queue: tx, ran: Arc::default(), pools })
     }
 
     /// How many lanes there are.
     pub fn count(&self) -> usize {
-        self.count
+        self.pools.len()
     }
 
     /// How many jobs the lanes have run so far.
@@ -107,7 +105,7 @@ impl Lanes {
     ) -> Result<T, LaneError> {
         let (tx, rx) = tokio::sync::oneshot::channel();
         let abandoned = Arc::new(AtomicBool::new(false));
-        let mut guard = Abandon(abandoned.clone(), false);
+        let _abandon = Abandon(abandoned.clone());
         let ran = self.ran.clone();
         let job: Job = Box::new(move || {
             if abandoned.load(Ordering::Relaxed) {
@@ -116,14 +114,8 @@ impl Lanes {
             ran.fetch_add(1, Ordering::Relaxed);
             let _ = tx.send(std::panic::catch_unwind(AssertUnwindSafe(f)));
         });
-        self.queue
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .send(job)
-            .map_err(|_| LaneError::Stopped)?;
-        let answer = rx.await;
-        guard.1 = true;
-        match answer {
+        self.queue.send(job).map_err(|_| LaneError::Stopped)?;
+        match rx.await {
             Ok(Ok(v)) => Ok(v),
             Ok(Err(_)) => Err(LaneError::Panicked),
             Err(_) => Err(LaneError::Stopped),
@@ -135,7 +127,7 @@ impl Lanes {
     pub fn hold(&self) -> Hold {
         let (started_tx, started_rx) = channel::<()>();
         let release = Arc::new((Mutex::new(false), std::sync::Condvar::new()));
-        for _ in 0..self.count {
+        for _ in 0..self.count() {
             let (started, release) = (started_tx.clone(), release.clone());
             let job: Job = Box::new(move || {
                 let _ = started.send(());
@@ -145,9 +137,9 @@ impl Lanes {
                     done = cv.wait(done).unwrap_or_else(PoisonError::into_inner);
                 }
             });
-            let _ = self.queue.lock().unwrap_or_else(PoisonError::into_inner).send(job);
+            let _ = self.queue.send(job);
         }
-        for _ in 0..self.count {
+        for _ in 0..self.count() {
             let _ = started_rx.recv();
         }
         Hold { release }

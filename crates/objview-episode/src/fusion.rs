@@ -53,8 +53,6 @@ pub struct FusedBlock {
     /// The positions of the block's slots (in `slots` order), a block-local copy of
     /// [`FusedCloud::pos`] that an insertion reads without a cache miss per voxel.
     centroids: Vec<[f64; 3]>,
-    /// Scratch of [`FusedCloud::insert`]: this insertion's point count, then offset.
-    bucket: u32,
     /// The block's slab for nearest searches ([`Bucketed::block_slab`]), made by the first
     /// search that needs it; cleared when an insertion changes the block.
     slab: OnceLock<Slab>,
@@ -70,7 +68,6 @@ impl FusedBlock {
             handle,
             changed_bits: [0; BLOCK_CELLS / 64],
             centroids: Vec::new(),
-            bucket: 0,
             slab: OnceLock::new(),
         }
     }
@@ -221,6 +218,10 @@ pub struct FusedCloud {
     /// The occupied blocks by superblock (far nearest searches).
     pub supergrid: SuperGrid,
     epoch: u32,
+    /// Scratch of [`FusedCloud::insert`] by allocation index (0 between insertions): the
+    /// block's point count in this insertion, then its offset. A compact array rather than a
+    /// field of each block, so the per-run counting reads no block.
+    bucket: Vec<u32>,
     /// The blocks the latest insertion changed, as (domain index, allocation index), by domain
     /// index: [`FusedCloud::latest_blocks`].
     latest: Vec<(u32, u32)>,
@@ -300,6 +301,7 @@ impl FusedCloud {
             block: Vec::new(),
             stamp: Vec::new(),
             epoch: 0,
+            bucket: Vec::new(),
             latest: Vec::new(),
         }
     }
@@ -393,19 +395,19 @@ impl FusedCloud {
         // its block key, domain index, allocation index and length, counted into the block
         // when the run ends.
         let mut run: ([i32; 3], usize, u32, u32) = ([i32::MIN; 3], usize::MAX, NONE, 0);
-        let mut end_run = |blocks: &mut [FusedBlock], (_, b, t, n): ([i32; 3], usize, u32, u32)| {
+        let mut end_run = |bucket: &mut [u32], (_, b, t, n): ([i32; 3], usize, u32, u32)| {
             if n > 0 {
-                let blk = &mut blocks[t as usize];
-                if blk.bucket == 0 {
+                let c = &mut bucket[t as usize];
+                if *c == 0 {
                     touched.push((b as u32, t));
                 }
-                blk.bucket += n;
+                *c += n;
             }
         };
         for &k in &keys {
             let bk = block_of(k);
             if bk != run.0 {
-                end_run(&mut self.blocks, run);
+                end_run(&mut self.bucket, run);
                 let Some(b) = self.domain.block_index(bk) else {
                     delta.dropped += 1;
                     at.push((NONE, 0));
@@ -418,31 +420,32 @@ impl FusedCloud {
                     self.table[b] = t;
                     let handle = self.supergrid.add_block(bk);
                     self.blocks.push(FusedBlock::new(bk, handle));
+                    self.bucket.push(0);
                 }
                 run = (bk, b, t, 0);
             }
             run.3 += 1;
             at.push((run.2, local_index(k) as u16));
         }
-        end_run(&mut self.blocks, run);
+        end_run(&mut self.bucket, run);
         // The blocks in domain order (the spatial order of the metric updates and of the
         // groups). Counts → start offsets, then the points by block, in input order.
         touched.sort_unstable();
         let mut offset = 0u32;
         for &(_, t) in &touched {
-            let blk = &mut self.blocks[t as usize];
-            let n = blk.bucket;
-            blk.bucket = offset;
+            let c = &mut self.bucket[t as usize];
+            let n = *c;
+            *c = offset;
             offset += n;
         }
+        // Every entry below `offset` is written below: no need to clear what is reused.
         let mut order = std::mem::take(&mut s.order);
-        order.clear();
         order.resize(offset as usize, Sorted::default());
         for (i, (&(t, li), &p)) in at.iter().zip(points).enumerate() {
             if t != NONE {
-                let blk = &mut self.blocks[t as usize];
-                order[blk.bucket as usize] = Sorted { p, i: i as u32, li: li as u32 };
-                blk.bucket += 1;
+                let c = &mut self.bucket[t as usize];
+                order[*c as usize] = Sorted { p, i: i as u32, li: li as u32 };
+                *c += 1;
             }
         }
         // Pass 2: block by block, sums per voxel (in the scratch), then the new centroids of
@@ -451,10 +454,23 @@ impl FusedCloud {
         let mut fresh = std::mem::take(&mut s.fresh);
         fresh.clear();
         let mut start = 0usize;
-        for &(_, t) in &touched {
+        for (ti, &(_, t)) in touched.iter().enumerate() {
+            // Software prefetches (hints, no effect on results): the block after next, then the
+            // next block's positions, slots and superblock entry, so that its first reads do
+            // not wait on memory (the touched blocks are scattered over a cloud of ~10 MB).
+            if let Some(&(_, t2)) = touched.get(ti + 2) {
+                prefetch_range(&self.blocks[t2 as usize..=t2 as usize]);
+            }
+            if let Some(&(_, t1)) = touched.get(ti + 1) {
+                let next = &self.blocks[t1 as usize];
+                if let Some(h) = next.handle {
+                    self.supergrid.prefetch(h);
+                }
+                prefetch_range(&next.centroids);
+                prefetch_range(&next.slots);
+            }
+            let end = std::mem::take(&mut self.bucket[t as usize]) as usize;
             let blk = &mut self.blocks[t as usize];
-            let end = blk.bucket as usize;
-            blk.bucket = 0;
             blk.changed_bits = [0; BLOCK_CELLS / 64];
             blk.slab = OnceLock::new();
             let scratch = &mut s.accum;
@@ -472,6 +488,19 @@ impl FusedCloud {
                 a.count += 1;
             }
             start = end;
+            // The global positions and stamps of the changed voxels seen before (scattered
+            // over the cloud), asked for ahead of the updates below.
+            for (w, &bits) in blk.changed_bits.iter().enumerate() {
+                let (occupied, base) = (blk.occupied[w], blk.before[w] as usize);
+                let mut bits = bits & occupied;
+                while bits != 0 {
+                    let b = bits.trailing_zeros();
+                    bits &= bits - 1;
+                    let s = blk.slots[base + ones_below(occupied, b)] as usize;
+                    prefetch_item(&self.pos[s]);
+                    prefetch_item(&self.stamp[s]);
+                }
+            }
             // In local-index order, so the block's slots and positions are visited in
             // ascending memory order (and the group lists them in that order).
             let f0 = fresh.len();
@@ -658,6 +687,44 @@ impl Bucketed for FusedCloud {
             self.blocks[t as usize].for_run(local_index(first), len, &mut f);
         });
     }
+}
+
+/// Asks the cache for the lines of `data` ahead of their use.
+#[inline(always)]
+fn prefetch_range<T>(data: &[T]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        let start = data.as_ptr() as *const i8;
+        let bytes = std::mem::size_of_val(data);
+        let mut off = 0;
+        while off < bytes {
+            // SAFETY: a prefetch is a hint; the address is within `data`.
+            unsafe { std::arch::x86_64::_mm_prefetch(start.add(off), std::arch::x86_64::_MM_HINT_T0) };
+            off += 64;
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = data;
+}
+
+/// Asks the cache for the line(s) of `item` ahead of its use (both lines when it straddles
+/// two).
+#[inline(always)]
+fn prefetch_item<T>(item: &T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        let start = item as *const T as *const i8;
+        // SAFETY: prefetches are hints; both addresses are within `item`.
+        unsafe {
+            std::arch::x86_64::_mm_prefetch(start, std::arch::x86_64::_MM_HINT_T0);
+            std::arch::x86_64::_mm_prefetch(
+                start.add(std::mem::size_of::<T>().saturating_sub(1)),
+                std::arch::x86_64::_MM_HINT_T0,
+            );
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = item;
 }
 
 /// A voxel seen for the first time by an insertion.

@@ -388,6 +388,24 @@ impl SuperGrid {
         self.lists[h.0 as usize][h.1 as usize].1.grow(p);
     }
 
+    /// Asks the cache for the entry of the block with handle `h` ahead of a
+    /// [`SuperGrid::grow_box`].
+    #[inline]
+    pub fn prefetch(&self, h: SuperHandle) {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(e) = self.lists.get(h.0 as usize).and_then(|l| l.get(h.1 as usize)) {
+            // SAFETY: a prefetch is a hint; the address is the entry's.
+            unsafe {
+                std::arch::x86_64::_mm_prefetch(
+                    e as *const ([i32; 3], Aabb) as *const i8,
+                    std::arch::x86_64::_MM_HINT_T0,
+                )
+            };
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = h;
+    }
+
     /// Grows the box of the block with handle `h` by the box `b` (nothing if it is empty):
     /// the box [`SuperGrid::grow`] by each of `b`'s points would give.
     pub fn grow_box(&mut self, h: SuperHandle, b: &Aabb) {

@@ -262,10 +262,14 @@ impl Coverage {
         let changes: Vec<(Vec<Change>, Vec<u32>)> = self
             .live_blocks
             .par_iter()
+            .enumerate()
             .with_min_len(16)
             .fold(
                 || (Scratch::default(), Vec::new(), Vec::new()),
-                |(mut sc, mut out, mut retired_in), &tb| {
+                |(mut sc, mut out, mut retired_in), (at, &tb)| {
+                    if let Some(&next) = this.live_blocks.get(at + 1) {
+                        this.prefetch_block(next);
+                    }
                     let from = out.len();
                     this.block_changes(fused, groups, tb, &mut sc, &mut out);
                     if out[from..].iter().any(|c| c.retire) {
@@ -304,6 +308,24 @@ impl Coverage {
             }
             let live = &self.live;
             self.live_blocks.retain(|&tb| !live[tb as usize].is_empty());
+        }
+    }
+
+    /// Asks the cache for the first data [`Coverage::block_changes`] reads of target block
+    /// `tb` (a hint: see [`crate::prefetch`]).
+    #[inline]
+    fn prefetch_block(&self, tb: u32) {
+        let live = &self.live[tb as usize];
+        crate::prefetch::item(&self.ix.blocks[tb as usize]);
+        crate::prefetch::range(&self.ix.octants[tb as usize..=tb as usize]);
+        crate::prefetch::range(&live[..live.len().min(16)]);
+        if let Some(&i) = live.first() {
+            let i = i as usize;
+            crate::prefetch::item(&self.d2[i]);
+            crate::prefetch::item(&self.nn[i]);
+            crate::prefetch::item(&self.ix.pts[i]);
+            crate::prefetch::item(&self.ix.own[i]);
+            crate::prefetch::item(&self.ix.near[i]);
         }
     }
 

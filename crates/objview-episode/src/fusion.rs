@@ -10,6 +10,7 @@
 
 use std::sync::OnceLock;
 
+use crate::prefetch;
 use crate::scratch::Pool;
 
 use crate::grid::{
@@ -459,15 +460,15 @@ impl FusedCloud {
             // next block's positions, slots and superblock entry, so that its first reads do
             // not wait on memory (the touched blocks are scattered over a cloud of ~10 MB).
             if let Some(&(_, t2)) = touched.get(ti + 2) {
-                prefetch_range(&self.blocks[t2 as usize..=t2 as usize]);
+                prefetch::range(&self.blocks[t2 as usize..=t2 as usize]);
             }
             if let Some(&(_, t1)) = touched.get(ti + 1) {
                 let next = &self.blocks[t1 as usize];
                 if let Some(h) = next.handle {
                     self.supergrid.prefetch(h);
                 }
-                prefetch_range(&next.centroids);
-                prefetch_range(&next.slots);
+                prefetch::range(&next.centroids);
+                prefetch::range(&next.slots);
             }
             let end = std::mem::take(&mut self.bucket[t as usize]) as usize;
             let blk = &mut self.blocks[t as usize];
@@ -497,8 +498,8 @@ impl FusedCloud {
                     let b = bits.trailing_zeros();
                     bits &= bits - 1;
                     let s = blk.slots[base + ones_below(occupied, b)] as usize;
-                    prefetch_item(&self.pos[s]);
-                    prefetch_item(&self.stamp[s]);
+                    prefetch::item(&self.pos[s]);
+                    prefetch::item(&self.stamp[s]);
                 }
             }
             // In local-index order, so the block's slots and positions are visited in
@@ -687,44 +688,6 @@ impl Bucketed for FusedCloud {
             self.blocks[t as usize].for_run(local_index(first), len, &mut f);
         });
     }
-}
-
-/// Asks the cache for the lines of `data` ahead of their use.
-#[inline(always)]
-fn prefetch_range<T>(data: &[T]) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        let start = data.as_ptr() as *const i8;
-        let bytes = std::mem::size_of_val(data);
-        let mut off = 0;
-        while off < bytes {
-            // SAFETY: a prefetch is a hint; the address is within `data`.
-            unsafe { std::arch::x86_64::_mm_prefetch(start.add(off), std::arch::x86_64::_MM_HINT_T0) };
-            off += 64;
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = data;
-}
-
-/// Asks the cache for the line(s) of `item` ahead of its use (both lines when it straddles
-/// two).
-#[inline(always)]
-fn prefetch_item<T>(item: &T) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        let start = item as *const T as *const i8;
-        // SAFETY: prefetches are hints; both addresses are within `item`.
-        unsafe {
-            std::arch::x86_64::_mm_prefetch(start, std::arch::x86_64::_MM_HINT_T0);
-            std::arch::x86_64::_mm_prefetch(
-                start.add(std::mem::size_of::<T>().saturating_sub(1)),
-                std::arch::x86_64::_MM_HINT_T0,
-            );
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = item;
 }
 
 /// A voxel seen for the first time by an insertion.

@@ -392,18 +392,9 @@ impl SuperGrid {
     /// [`SuperGrid::grow_box`].
     #[inline]
     pub fn prefetch(&self, h: SuperHandle) {
-        #[cfg(target_arch = "x86_64")]
         if let Some(e) = self.lists.get(h.0 as usize).and_then(|l| l.get(h.1 as usize)) {
-            // SAFETY: a prefetch is a hint; the address is the entry's.
-            unsafe {
-                std::arch::x86_64::_mm_prefetch(
-                    e as *const ([i32; 3], Aabb) as *const i8,
-                    std::arch::x86_64::_MM_HINT_T0,
-                )
-            };
+            crate::prefetch::item(e);
         }
-        #[cfg(not(target_arch = "x86_64"))]
-        let _ = h;
     }
 
     /// Grows the box of the block with handle `h` by the box `b` (nothing if it is empty):

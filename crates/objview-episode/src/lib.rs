@@ -32,6 +32,7 @@ pub mod engine;
 pub mod fusion;
 pub mod grid;
 pub mod metrics;
+mod prefetch;
 pub mod reference;
 pub mod result;
 pub mod scene;

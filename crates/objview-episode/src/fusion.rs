@@ -458,7 +458,7 @@ impl FusedCloud {
         for (ti, &(_, t)) in touched.iter().enumerate() {
             // Software prefetches (hints, no effect on results): the block after next, then the
             // next block's positions, slots and superblock entry, so that its first reads do
-            // not wait on memory (the touched blocks are scattered over a cloud of ~10 MB).
+            // not wait on memory (the touched blocks are scattered over a cloud of ~30 MB).
             if let Some(&(_, t2)) = touched.get(ti + 2) {
                 prefetch::range(&self.blocks[t2 as usize..=t2 as usize]);
             }

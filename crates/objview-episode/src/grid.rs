@@ -391,7 +391,7 @@ impl SuperGrid {
     /// Asks the cache for the entry of the block with handle `h` ahead of a
     /// [`SuperGrid::grow_box`].
     #[inline]
-    pub fn prefetch(&self, h: SuperHandle) {
+    pub(crate) fn prefetch(&self, h: SuperHandle) {
         if let Some(e) = self.lists.get(h.0 as usize).and_then(|l| l.get(h.1 as usize)) {
             crate::prefetch::item(e);
         }

@@ -194,7 +194,7 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
     });
     let cpu_json = cpu.map(|((u0, s0), (u1, s1))| {
         let (user, system) = (u1 - u0, s1 - s0);
-        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let cores = host.logical_cpus;
         let busy = (user + system) / report.seconds.max(1e-9);
         println!(
             "  CPU of this process ({}) during the run: user {user:.2} s + system {system:.2} s = {busy:.2} of {cores} cores busy (system time is mostly the kernel zeroing fresh pages; on a VM its cost moves from run to run, and throughput with it)",

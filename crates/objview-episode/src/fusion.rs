@@ -125,10 +125,11 @@ impl FusedBlock {
 
     /// Calls `f(place)` with the place in `slots` and `centroids` of each voxel the latest
     /// insertion that touched the block changed (created or moved), in local-index order.
+    /// During that insertion, before its new voxels are added, these are the moved ones.
     #[inline]
     fn for_each_changed_place(&self, mut f: impl FnMut(usize)) {
         for ((&bits, &word), &base) in self.changed_bits.iter().zip(&self.occupied).zip(&self.before) {
-            let mut bits = bits;
+            let mut bits = bits & word;
             while bits != 0 {
                 let b = bits.trailing_zeros();
                 bits &= bits - 1;
@@ -491,17 +492,11 @@ impl FusedCloud {
             start = end;
             // The global positions and stamps of the changed voxels seen before (scattered
             // over the cloud), asked for ahead of the updates below.
-            for (w, &bits) in blk.changed_bits.iter().enumerate() {
-                let (occupied, base) = (blk.occupied[w], blk.before[w] as usize);
-                let mut bits = bits & occupied;
-                while bits != 0 {
-                    let b = bits.trailing_zeros();
-                    bits &= bits - 1;
-                    let s = blk.slots[base + ones_below(occupied, b)] as usize;
-                    prefetch::item(&self.pos[s]);
-                    prefetch::item(&self.stamp[s]);
-                }
-            }
+            blk.for_each_changed_place(|j| {
+                let s = blk.slots[j] as usize;
+                prefetch::item(&self.pos[s]);
+                prefetch::item(&self.stamp[s]);
+            });
             // In local-index order, so the block's slots and positions are visited in
             // ascending memory order (and the group lists them in that order).
             let f0 = fresh.len();

@@ -4,7 +4,10 @@
 //! elsewhere); asking for it one block ahead took the fusion of a view from 3.35 to 2.28 ms
 //! (`fusion_views`). A prefetch never changes a result: it reads nothing into the program.
 
-/// Asks for the cache lines of `data`.
+/// Asks for the cache lines at `data`'s first byte and every 64 bytes after it, within `data`:
+/// all of its lines but, when it starts mid-line, possibly the last. (Asking for that one too,
+/// from the aligned start, made `fusion_views` slower: 2.11–2.25 → 2.37–2.48 ms per view,
+/// alternating runs.)
 #[inline(always)]
 pub(crate) fn range<T>(data: &[T]) {
     #[cfg(target_arch = "x86_64")]

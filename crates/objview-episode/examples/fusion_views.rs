@@ -5,13 +5,14 @@
 //! `cargo run --profile ci -p objview-episode --example fusion_views [-- REPEATS]`
 //!
 //! Prints the insertion time per view (median over views, and the total) per repeat, the
-//! points per view and the final cloud size.
+//! points per view, the runs of consecutive points in one block per view (what the insertion
+//! buckets) and the final cloud size.
 
 use std::path::Path;
 use std::time::Instant;
 
 use objview_episode::fusion::FusedCloud;
-use objview_episode::grid::Domain;
+use objview_episode::grid::{block_of, Domain};
 use objview_geom::normalize::{normalize, Normalization};
 use objview_render::{Camera, Frame, Intrinsics, Renderer};
 use objview_views::ViewSet;
@@ -35,6 +36,13 @@ fn main() {
         })
         .collect();
     let n: usize = views.iter().map(Vec::len).sum();
+    let runs: usize = views
+        .iter()
+        .map(|pts| {
+            let blocks: Vec<[i32; 3]> = pts.iter().map(|&p| block_of(domain.key(p))).collect();
+            blocks.windows(2).filter(|w| w[0] != w[1]).count() + usize::from(!blocks.is_empty())
+        })
+        .sum();
     for r in 0..repeats {
         let mut fused = FusedCloud::new(domain.clone());
         let mut times: Vec<f64> = Vec::with_capacity(views.len());
@@ -46,9 +54,10 @@ fn main() {
         let total: f64 = times.iter().sum();
         times.sort_by(f64::total_cmp);
         println!(
-            "repeat {r}: {} views, {:.0} points per view, {} fused: insert median {:.3} ms/view, total {:.1} ms",
+            "repeat {r}: {} views, {:.0} points in {:.0} block runs per view, {} fused: insert median {:.3} ms/view, total {:.1} ms",
             views.len(),
             n as f64 / views.len() as f64,
+            runs as f64 / views.len() as f64,
             fused.len(),
             times[times.len() / 2],
             total

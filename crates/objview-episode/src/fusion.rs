@@ -714,38 +714,37 @@ const FRESH_SORT_SHARE: usize = 16;
 /// without its blocks, tables and slot bookkeeping. For callers that need one view's fused cloud
 /// as a point set (the oracle's per-candidate coverage).
 ///
-/// The points are grouped by block with a counting sort (the touched blocks put in domain
-/// order, each block's points kept in input order), then summed per voxel in a block-local
-/// table and emitted in local-index order: the order of sorting by (block index · 512 + local
-/// index, input index), without sorting the points.
+/// The points are grouped by block as [`FusedCloud::insert`] groups them — a counting sort of
+/// the runs of consecutive points in one block (the touched blocks put in domain order, each
+/// block's runs kept in input order) —, then summed per voxel in a block-local table and
+/// emitted in local-index order: the order of sorting by (block index · 512 + local index,
+/// input index), without sorting the points.
 pub fn frame_centroids(domain: &Domain, points: &[[f64; 3]]) -> Vec<[f64; 3]> {
     let mut keys = Vec::new();
     domain.keys_into(points, &mut keys);
-    // Pass 1: each point's touched-block number and local index; the touched blocks' counts.
+    // Pass 1: the runs of consecutive points in one block (pixels along a row mostly stay in
+    // one), each with its block's touched number; the touched blocks' run counts. Points
+    // outside the domain are dropped.
     let mut number = vec![NONE; domain.num_blocks()];
-    let mut touched: Vec<(u32, u32)> = Vec::new(); // (domain block index, count)
-    let mut at: Vec<(u32, u16)> = Vec::with_capacity(points.len());
-    let mut last = (usize::MAX, NONE);
-    for &k in &keys {
-        let Some(b) = domain.block_index(block_of(k)) else {
-            at.push((NONE, 0));
-            continue;
-        };
-        let t = if b == last.0 {
-            last.1
-        } else {
+    let mut touched: Vec<(u32, u32)> = Vec::new(); // (domain block index, runs)
+    let mut runs: Vec<(u32, u32, u32)> = Vec::new(); // (touched number, first, end)
+    let mut first = 0;
+    while first < keys.len() {
+        let bk = block_of(keys[first]);
+        let end = first + keys[first..].iter().take_while(|&&k| block_of(k) == bk).count();
+        if let Some(b) = domain.block_index(bk) {
             let t = &mut number[b];
             if *t == NONE {
                 *t = touched.len() as u32;
                 touched.push((b as u32, 0));
             }
-            last = (b, *t);
-            *t
-        };
-        touched[t as usize].1 += 1;
-        at.push((t, local_index(k) as u16));
+            touched[*t as usize].1 += 1;
+            runs.push((*t, first as u32, end as u32));
+        }
+        first = end;
     }
-    // Blocks in domain order: each block's start offset, by touched-block number.
+    // Blocks in domain order: each block's start offset, by touched-block number; then the
+    // runs by block, in input order.
     let mut by_domain: Vec<u32> = (0..touched.len() as u32).collect();
     by_domain.sort_unstable_by_key(|&t| touched[t as usize].0);
     let mut next = vec![0u32; touched.len()];
@@ -754,13 +753,11 @@ pub fn frame_centroids(domain: &Domain, points: &[[f64; 3]]) -> Vec<[f64; 3]> {
         next[t as usize] = offset;
         offset += touched[t as usize].1;
     }
-    let mut order: Vec<(u16, u32)> = vec![(0, 0); offset as usize];
-    for (i, &(t, li)) in at.iter().enumerate() {
-        if t != NONE {
-            let o = &mut next[t as usize];
-            order[*o as usize] = (li, i as u32);
-            *o += 1;
-        }
+    let mut order: Vec<(u32, u32)> = vec![(0, 0); offset as usize];
+    for &(t, first, end) in &runs {
+        let o = &mut next[t as usize];
+        order[*o as usize] = (first, end);
+        *o += 1;
     }
     // Pass 2, block by block: sums per voxel in input order, then the centroids by voxel.
     let mut sums = vec![([0.0f64; 3], 0u32); BLOCK_CELLS];
@@ -769,19 +766,21 @@ pub fn frame_centroids(domain: &Domain, points: &[[f64; 3]]) -> Vec<[f64; 3]> {
     for &t in &by_domain {
         let end = start + touched[t as usize].1 as usize;
         let mut seen = [0u64; BLOCK_CELLS / 64];
-        for &(li, i) in &order[start..end] {
-            let li = li as usize;
-            let (w, bit) = (li >> 6, 1u64 << (li & 63));
-            let a = &mut sums[li];
-            if seen[w] & bit == 0 {
-                seen[w] |= bit;
-                *a = ([0.0; 3], 0);
+        for &(first, last) in &order[start..end] {
+            let (f, l) = (first as usize, last as usize);
+            for (&p, &k) in points[f..l].iter().zip(&keys[f..l]) {
+                let li = local_index(k);
+                let (w, bit) = (li >> 6, 1u64 << (li & 63));
+                let a = &mut sums[li];
+                if seen[w] & bit == 0 {
+                    seen[w] |= bit;
+                    *a = ([0.0; 3], 0);
+                }
+                a.0[0] += p[0];
+                a.0[1] += p[1];
+                a.0[2] += p[2];
+                a.1 += 1;
             }
-            let p = points[i as usize];
-            a.0[0] += p[0];
-            a.0[1] += p[1];
-            a.0[2] += p[2];
-            a.1 += 1;
         }
         for (w, &bits) in seen.iter().enumerate() {
             let mut bits = bits;
@@ -839,6 +838,28 @@ mod tests {
             assert_eq!(got.len(), f.len());
             assert!(n < 1000 || got.len() * 10 < n, "voxels with several points: {} of {n}", got.len());
         }
+        // Image-like rows: long runs of points in one block, each block visited again by later
+        // rows (so the order of a block's runs matters), and points outside the domain.
+        let pts: Vec<[f64; 3]> = (0..30_000)
+            .map(|i| {
+                let (row, col) = ((i / 200) as f64, (i % 200) as f64);
+                if i % 50 == 49 {
+                    [0.6, 0.0, 0.0]
+                } else {
+                    [
+                        -0.1 + col * 0.0011,
+                        -0.08 + row * 0.0011,
+                        0.01 * (col * 0.05).sin() + rng.gen_range(-0.001..0.001),
+                    ]
+                }
+            })
+            .collect();
+        let mut f = FusedCloud::new(d.clone());
+        f.insert(&pts);
+        let want: Vec<[f64; 3]> = f.latest_changed().iter().map(|&s| f.pos[s as usize]).collect();
+        let got = frame_centroids(&d, &pts);
+        let bits = |v: &[[f64; 3]]| -> Vec<[u64; 3]> { v.iter().map(|p| p.map(f64::to_bits)).collect() };
+        assert_eq!(bits(&got), bits(&want), "rows");
     }
 
     #[test]

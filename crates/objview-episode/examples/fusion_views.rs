@@ -12,7 +12,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use objview_episode::fusion::FusedCloud;
-use objview_episode::grid::{block_of, Domain};
+use objview_episode::grid::{block_runs, Domain};
 use objview_geom::normalize::{normalize, Normalization};
 use objview_render::{Camera, Frame, Intrinsics, Renderer};
 use objview_views::ViewSet;
@@ -39,8 +39,9 @@ fn main() {
     let runs: usize = views
         .iter()
         .map(|pts| {
-            let blocks: Vec<[i32; 3]> = pts.iter().map(|&p| block_of(domain.key(p))).collect();
-            blocks.windows(2).filter(|w| w[0] != w[1]).count() + usize::from(!blocks.is_empty())
+            let mut keys = Vec::new();
+            domain.keys_into(pts, &mut keys);
+            block_runs(&keys).count()
         })
         .sum();
     for r in 0..repeats {

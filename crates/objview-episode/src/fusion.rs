@@ -14,8 +14,8 @@ use crate::prefetch;
 use crate::scratch::Pool;
 
 use crate::grid::{
-    block_of, local_index, lower_best_over, nearest_in, runs_in_box, Aabb, Bucketed, ChangedBlocks, Domain,
-    Slab, SuperGrid, SuperHandle, BLOCK_CELLS, NONE,
+    block_of, block_runs, local_index, lower_best_over, nearest_in, runs_in_box, Aabb, Bucketed,
+    ChangedBlocks, Domain, Slab, SuperGrid, SuperHandle, BLOCK_CELLS, NONE,
 };
 
 // A block row (x) is one byte of the occupancy words (`FusedBlock::row_occupancy`).
@@ -390,42 +390,26 @@ impl FusedCloud {
         touched.clear();
         let mut keys = std::mem::take(&mut s.keys);
         self.domain.keys_into(points, &mut keys);
-        // The current run: its block key, domain index, allocation index and first point.
-        let mut run: ([i32; 3], usize, u32, u32) = ([i32::MIN; 3], usize::MAX, NONE, 0);
-        let mut end_run = |bucket: &mut [u32],
-                           runs: &mut Vec<(u32, u32, u32)>,
-                           (_, b, t, first): ([i32; 3], usize, u32, u32),
-                           end: usize| {
-            if t != NONE && end as u32 > first {
-                let c = &mut bucket[t as usize];
-                if *c == 0 {
-                    touched.push((b as u32, t));
-                }
-                *c += 1;
-                runs.push((t, first, end as u32));
+        for (bk, first, end) in block_runs(&keys) {
+            let Some(b) = self.domain.block_index(bk) else {
+                delta.dropped += end - first;
+                continue;
+            };
+            let mut t = self.table[b];
+            if t == NONE {
+                t = self.blocks.len() as u32;
+                self.table[b] = t;
+                let handle = self.supergrid.add_block(bk);
+                self.blocks.push(FusedBlock::new(bk, handle));
+                self.bucket.push(0);
             }
-        };
-        for (i, &k) in keys.iter().enumerate() {
-            let bk = block_of(k);
-            if bk != run.0 {
-                end_run(&mut self.bucket, &mut runs, run, i);
-                let Some(b) = self.domain.block_index(bk) else {
-                    delta.dropped += 1;
-                    run = ([i32::MIN; 3], usize::MAX, NONE, 0);
-                    continue;
-                };
-                let mut t = self.table[b];
-                if t == NONE {
-                    t = self.blocks.len() as u32;
-                    self.table[b] = t;
-                    let handle = self.supergrid.add_block(bk);
-                    self.blocks.push(FusedBlock::new(bk, handle));
-                    self.bucket.push(0);
-                }
-                run = (bk, b, t, i as u32);
+            let c = &mut self.bucket[t as usize];
+            if *c == 0 {
+                touched.push((b as u32, t));
             }
+            *c += 1;
+            runs.push((t, first as u32, end as u32));
         }
-        end_run(&mut self.bucket, &mut runs, run, keys.len());
         // The blocks in domain order (the spatial order of the metric updates and of the
         // groups). Counts → start offsets, then the runs by block, in input order.
         touched.sort_unstable();
@@ -728,10 +712,7 @@ pub fn frame_centroids(domain: &Domain, points: &[[f64; 3]]) -> Vec<[f64; 3]> {
     let mut number = vec![NONE; domain.num_blocks()];
     let mut touched: Vec<(u32, u32)> = Vec::new(); // (domain block index, runs)
     let mut runs: Vec<(u32, u32, u32)> = Vec::new(); // (touched number, first, end)
-    let mut first = 0;
-    while first < keys.len() {
-        let bk = block_of(keys[first]);
-        let end = first + keys[first..].iter().take_while(|&&k| block_of(k) == bk).count();
+    for (bk, first, end) in block_runs(&keys) {
         if let Some(b) = domain.block_index(bk) {
             let t = &mut number[b];
             if *t == NONE {
@@ -741,7 +722,6 @@ pub fn frame_centroids(domain: &Domain, points: &[[f64; 3]]) -> Vec<[f64; 3]> {
             touched[*t as usize].1 += 1;
             runs.push((*t, first as u32, end as u32));
         }
-        first = end;
     }
     // Blocks in domain order: each block's start offset, by touched-block number; then the
     // runs by block, in input order.
@@ -897,6 +877,9 @@ mod tests {
         // Out of domain points are counted, not fused.
         assert_eq!(f.insert(&[[5.0, 0.0, 0.0]]).dropped, 1);
         assert_eq!(f.len(), 2);
+        // Each of them, also several in a row (one run of points outside the domain).
+        let d = f.insert(&[[5.0, 0.0, 0.0], [5.0, 0.0, 0.0], [0.004, 0.001, 0.001], [-5.0, 0.0, 0.0]]);
+        assert_eq!((d.dropped, f.len()), (3, 2));
     }
 
     /// The fusion rule written as one plain pass in input order (a map from voxel to slot):

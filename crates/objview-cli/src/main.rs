@@ -73,6 +73,13 @@ enum Command {
 }
 
 fn main() {
+    // Before anything else: a CPU without the build's baseline (x86-64-v2) would stop with
+    // SIGILL at the first POPCNT deep inside a run; say it in one line instead.
+    let missing = objview_runs::cpu::missing_baseline();
+    if !missing.is_empty() {
+        eprintln!("error: {}", objview_runs::cpu::baseline_error(&missing));
+        std::process::exit(1);
+    }
     // `objview run --help` lists the planners of the registry (a runtime table).
     let command = Cli::command().mut_subcommand("run", |c| c.after_help(run::planners_help()));
     let cli = match command.try_get_matches().and_then(|m| Cli::from_arg_matches(&m)) {

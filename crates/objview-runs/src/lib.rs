@@ -9,7 +9,8 @@
 //! - [`demo`]: the main job on the built-in objects, stage by stage.
 //! - [`record`]: the settings record every episode result carries (shared with the server);
 //!   [`provenance`]: the settings block of every other output file.
-//! - [`params`]: `NAME=VALUE` planner parameters; [`cache`]: cache locations.
+//! - [`params`]: `NAME=VALUE` planner parameters; [`cache`]: cache locations; [`cpu`]: the
+//!   instruction-set baseline of the build, checked at start-up.
 //! - [`bench`](mod@bench): the measurement procedures of `objview bench …` (episode step, annotation,
 //!   rendering).
 //!
@@ -19,6 +20,7 @@
 pub mod annotate;
 pub mod bench;
 pub mod cache;
+pub mod cpu;
 pub mod demo;
 pub mod episodes;
 pub mod params;

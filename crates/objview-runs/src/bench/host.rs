@@ -21,6 +21,9 @@ pub struct Host {
     /// The run-time-detected x86 features that objview's hot paths select on (`avx2`, `popcnt`)
     /// or that bear on their speed (`fma`, `avx512f`), in that order; empty elsewhere.
     pub features: Vec<&'static str>,
+    /// The instruction-set baseline the binary was compiled for ([`crate::cpu::build_baseline`]:
+    /// `x86-64-v2` unless `RUSTFLAGS` replaced the workspace's flags).
+    pub build: &'static str,
 }
 
 impl Host {
@@ -28,18 +31,22 @@ impl Host {
     pub fn detect() -> Host {
         let cpu = read_cpuinfo().as_deref().and_then(cpu_model).unwrap_or_else(|| "unknown".to_string());
         let logical_cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
-        Host { cpu, logical_cpus, features: simd_features() }
+        Host { cpu, logical_cpus, features: simd_features(), build: crate::cpu::build_baseline() }
     }
 
-    /// `host: MODEL, N logical CPUs, features: a b c` (one line, for the benchmark's header).
+    /// `host: MODEL, N logical CPUs, features: a b c, build: x86-64-v2` (one line, for the
+    /// benchmark's header).
     pub fn line(&self) -> String {
         let features = if self.features.is_empty() { "none".to_string() } else { self.features.join(" ") };
-        format!("host: {}, {} logical CPUs, features: {}", self.cpu, self.logical_cpus, features)
+        format!(
+            "host: {}, {} logical CPUs, features: {}, build: {}",
+            self.cpu, self.logical_cpus, features, self.build
+        )
     }
 
-    /// `{"cpu": …, "logical_cpus": …, "features": […]}`.
+    /// `{"cpu": …, "logical_cpus": …, "features": […], "build": …}`.
     pub fn to_json(&self) -> Value {
-        json!({"cpu": self.cpu, "logical_cpus": self.logical_cpus, "features": self.features})
+        json!({"cpu": self.cpu, "logical_cpus": self.logical_cpus, "features": self.features, "build": self.build})
     }
 }
 
@@ -101,14 +108,19 @@ mod tests {
 
     #[test]
     fn the_line_and_the_json_carry_the_same_fields() {
-        let h = Host { cpu: "AMD EPYC".into(), logical_cpus: 2, features: vec!["avx2", "popcnt"] };
-        assert_eq!(h.line(), "host: AMD EPYC, 2 logical CPUs, features: avx2 popcnt");
+        let h = Host {
+            cpu: "AMD EPYC".into(),
+            logical_cpus: 2,
+            features: vec!["avx2", "popcnt"],
+            build: "x86-64-v2",
+        };
+        assert_eq!(h.line(), "host: AMD EPYC, 2 logical CPUs, features: avx2 popcnt, build: x86-64-v2");
         assert_eq!(
             h.to_json(),
-            json!({"cpu": "AMD EPYC", "logical_cpus": 2, "features": ["avx2", "popcnt"]})
+            json!({"cpu": "AMD EPYC", "logical_cpus": 2, "features": ["avx2", "popcnt"], "build": "x86-64-v2"})
         );
-        let bare = Host { cpu: "unknown".into(), logical_cpus: 1, features: vec![] };
-        assert_eq!(bare.line(), "host: unknown, 1 logical CPUs, features: none");
+        let bare = Host { cpu: "unknown".into(), logical_cpus: 1, features: vec![], build: "x86-64" };
+        assert_eq!(bare.line(), "host: unknown, 1 logical CPUs, features: none, build: x86-64");
         let here = Host::detect();
         assert!(here.logical_cpus >= 1 && !here.cpu.is_empty());
     }

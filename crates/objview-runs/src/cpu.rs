@@ -1,11 +1,11 @@
 //! The instruction-set baseline of this build, checked once at start-up.
 //!
-//! On x86-64 Linux the workspace is compiled for **x86-64-v2** (`.cargo/config.toml`: POPCNT,
-//! SSE3, SSSE3, SSE4.1, SSE4.2, CMPXCHG16B, LAHF/SAHF; every x86-64 CPU since 2009, and the
-//! baseline RHEL 9 requires), because the hot paths count bits everywhere — the fusion's ranks in
-//! its occupancy words, the coverage and cover searches' bitsets — and the generic x86-64
-//! target has no POPCNT instruction, so each `count_ones` became a dozen instructions
-//! (README, Performance, "The x86-64-v2 baseline"). Results do not depend on it (no
+//! On x86-64 Linux the workspace is compiled with the **x86-64-v2** features
+//! (`.cargo/config.toml`: POPCNT, SSE3, SSSE3, SSE4.1, SSE4.2, CMPXCHG16B, LAHF/SAHF, with LLVM's
+//! generic tuning; every x86-64 CPU since 2009, and the baseline RHEL 9 requires), because the
+//! hot paths count bits everywhere — the fusion's ranks in its occupancy words, the coverage and
+//! cover searches' bitsets — and the generic x86-64 target has no POPCNT instruction, so each
+//! `count_ones` became a dozen instructions (README, Performance, "The x86-64-v2 baseline"). Results do not depend on it (no
 //! floating-point operation changes; tested with the golden outputs and the learned planners'
 //! training). A CPU without these instructions would stop at the first one with SIGILL
 //! somewhere deep in a run; [`missing_baseline`] lets the binary say so in one line instead.

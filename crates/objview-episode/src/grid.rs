@@ -222,12 +222,34 @@ fn lower_best(best: &mut (f64, u32), d: f64, i: u32) {
 }
 
 /// [`Bucketed::lower_best_in_block`] over the points `pts` named `index(j)`, in two passes: the
-/// smallest d² over all of them (branch-free, in lanes that the compiler vectorizes; a minimum
-/// does not depend on the order it is taken in), and only where that can change `best`, the
-/// smallest index among the points at it. The result is the smallest (d², index) of `best` and
-/// the points — what the one-by-one comparison keeps, whatever the order — so the same bits.
+/// smallest d² over all of them (branch-free; a minimum does not depend on the order it is
+/// taken in), and only where that can change `best`, the smallest index among the points at it.
+/// The result is the smallest (d², index) of `best` and the points — what the one-by-one
+/// comparison keeps, whatever the order — so the same bits.
+///
+/// On x86-64 with AVX2 (selected at run time) both passes take four points per step: their
+/// twelve coordinates in three loads, transposed into x, y and z vectors by two shuffles each,
+/// then the same subtractions, products and sums as [`dist2`] in the same order (no FMA), so the
+/// same distances; the portable passes run two lanes of SSE2 on the interleaved coordinates, and
+/// the second pass one point at a time.
 #[inline]
 pub(crate) fn lower_best_over(
+    pts: &[[f64; 3]],
+    index: impl Fn(usize) -> u32,
+    p: [f64; 3],
+    best: &mut (f64, u32),
+) {
+    #[cfg(target_arch = "x86_64")]
+    if pts.len() >= 4 && std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has the feature `lower_best_over_avx2` is compiled for.
+        return unsafe { lower_best_over_avx2(pts, index, p, best) };
+    }
+    lower_best_over_portable(pts, index, p, best)
+}
+
+/// [`lower_best_over`] without AVX2.
+#[inline]
+pub(crate) fn lower_best_over_portable(
     pts: &[[f64; 3]],
     index: impl Fn(usize) -> u32,
     p: [f64; 3],
@@ -254,6 +276,80 @@ pub(crate) fn lower_best_over(
     }
     let mut at = u32::MAX;
     for (j, &q) in pts.iter().enumerate() {
+        if dist2(p, q) == min {
+            at = at.min(index(j));
+        }
+    }
+    if min < best.0 || at < best.1 {
+        *best = (min, at);
+    }
+}
+
+/// The squared distances from `(px, py, pz)` to the four points whose coordinates start at `f`
+/// (twelve f64, point-major), as [`dist2`] computes them: ((dx² + dy²) + dz²), dx = p − q.
+///
+/// # Safety
+/// `f` must point to twelve readable f64.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn dist2_x4(
+    f: *const f64,
+    px: std::arch::x86_64::__m256d,
+    py: std::arch::x86_64::__m256d,
+    pz: std::arch::x86_64::__m256d,
+) -> std::arch::x86_64::__m256d {
+    use std::arch::x86_64::*;
+    // v0 = [x0 y0 | z0 x1], v1 = [y1 z1 | x2 y2], v2 = [z2 x3 | y3 z3] (128-bit halves).
+    let (v0, v1, v2) = unsafe { (_mm256_loadu_pd(f), _mm256_loadu_pd(f.add(4)), _mm256_loadu_pd(f.add(8))) };
+    let a = _mm256_permute2f128_pd::<0x30>(v0, v1); // [x0 y0 | x2 y2]
+    let b = _mm256_permute2f128_pd::<0x21>(v0, v2); // [z0 x1 | z2 x3]
+    let c = _mm256_permute2f128_pd::<0x30>(v1, v2); // [y1 z1 | y3 z3]
+    let x = _mm256_shuffle_pd::<0b1010>(a, b);
+    let y = _mm256_shuffle_pd::<0b0101>(a, c);
+    let z = _mm256_shuffle_pd::<0b1010>(b, c);
+    let (dx, dy, dz) = (_mm256_sub_pd(px, x), _mm256_sub_pd(py, y), _mm256_sub_pd(pz, z));
+    _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)), _mm256_mul_pd(dz, dz))
+}
+
+/// [`lower_best_over`] compiled for AVX2: both passes four points at a time ([`dist2_x4`]).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn lower_best_over_avx2(pts: &[[f64; 3]], index: impl Fn(usize) -> u32, p: [f64; 3], best: &mut (f64, u32)) {
+    use std::arch::x86_64::*;
+    let (px, py, pz) = (_mm256_set1_pd(p[0]), _mm256_set1_pd(p[1]), _mm256_set1_pd(p[2]));
+    let full = pts.len() / 4 * 4;
+    let flat = pts.as_flattened().as_ptr();
+    let mut m = _mm256_set1_pd(f64::INFINITY);
+    for c in (0..full).step_by(4) {
+        // SAFETY: points c..c + 4 lie within `pts`.
+        let d = unsafe { dist2_x4(flat.add(3 * c), px, py, pz) };
+        // `minpd(d, m)` is `d < m ? d : m`, the portable pass's comparison.
+        m = _mm256_min_pd(d, m);
+    }
+    let mut lanes = [0.0; 4];
+    // SAFETY: `lanes` holds four f64.
+    unsafe { _mm256_storeu_pd(lanes.as_mut_ptr(), m) };
+    let mut min = lanes.iter().fold(f64::INFINITY, |a, &b| if b < a { b } else { a });
+    for &q in &pts[full..] {
+        let d = dist2(p, q);
+        min = if d < min { d } else { min };
+    }
+    if min > best.0 || (min == best.0 && best.1 == NONE) {
+        return;
+    }
+    let mut at = u32::MAX;
+    let target = _mm256_set1_pd(min);
+    for c in (0..full).step_by(4) {
+        // SAFETY: as above.
+        let d = unsafe { dist2_x4(flat.add(3 * c), px, py, pz) };
+        let mut hits = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_EQ_OQ>(d, target)) as u32;
+        while hits != 0 {
+            at = at.min(index(c + hits.trailing_zeros() as usize));
+            hits &= hits - 1;
+        }
+    }
+    for (j, &q) in pts.iter().enumerate().skip(full) {
         if dist2(p, q) == min {
             at = at.min(index(j));
         }
@@ -1599,6 +1695,49 @@ mod tests {
         }
     }
 
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn four_distances_at_once_are_dist2_bit_for_bit() {
+        // Random coordinates (on the lattice of the test below every sum would be exact, and a
+        // changed order of operations would go unseen): each lane is `dist2` of its point, and
+        // the AVX2 minimum search answers what the portable one answers.
+        use rand::{Rng, SeedableRng};
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            eprintln!("no AVX2 on this CPU: only the portable path exists here");
+            return;
+        }
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(45);
+        for trial in 0..2000 {
+            let scale = [1e-3, 1.0, 37.0][trial % 3];
+            let n = rng.gen_range(4..48);
+            let pts: Vec<[f64; 3]> =
+                (0..n).map(|_| [0; 3].map(|_: i32| rng.gen_range(-1.0..1.0) * scale)).collect();
+            let p = [0; 3].map(|_: i32| rng.gen_range(-1.0..1.0) * scale);
+            let mut lanes = [0.0; 4];
+            // SAFETY: the CPU has AVX2 (checked above) and `pts` holds at least four points.
+            unsafe {
+                use std::arch::x86_64::*;
+                let d = dist2_x4(
+                    pts.as_flattened().as_ptr(),
+                    _mm256_set1_pd(p[0]),
+                    _mm256_set1_pd(p[1]),
+                    _mm256_set1_pd(p[2]),
+                );
+                _mm256_storeu_pd(lanes.as_mut_ptr(), d);
+            }
+            for (l, &d) in lanes.iter().enumerate() {
+                assert_eq!(d.to_bits(), dist2(p, pts[l]).to_bits(), "trial {trial}, lane {l}");
+            }
+            let names: Vec<u32> = (0..n as u32).rev().collect();
+            let start = if trial % 2 == 0 { (f64::INFINITY, NONE) } else { (dist2(p, pts[n / 2]), NONE) };
+            let (mut a, mut b) = (start, start);
+            // SAFETY: the CPU has AVX2.
+            unsafe { lower_best_over_avx2(&pts, |j| names[j], p, &mut a) };
+            lower_best_over_portable(&pts, |j| names[j], p, &mut b);
+            assert_eq!((a.0.to_bits(), a.1), (b.0.to_bits(), b.1), "trial {trial}");
+        }
+    }
+
     #[test]
     fn block_minima_equal_one_by_one_comparisons() {
         use rand::{Rng, SeedableRng};
@@ -1607,7 +1746,7 @@ mod tests {
         for trial in 0..5000 {
             // Points on a coarse lattice (many exact ties), some duplicated, named by distinct
             // indices in random order; every length from empty to a few lanes plus a remainder.
-            let n = rng.gen_range(0..24);
+            let n = rng.gen_range(0..40);
             let lattice =
                 |rng: &mut rand_chacha::ChaCha8Rng| [0; 3].map(|_: i32| rng.gen_range(-2..3) as f64 * 0.25);
             let mut pts: Vec<[f64; 3]> = Vec::new();
@@ -1647,6 +1786,10 @@ mod tests {
             let mut got = start;
             lower_best_over(&pts, |j| names[j], p, &mut got);
             assert_eq!(got, want, "trial {trial}: {pts:?} from {p:?}, start {start:?}");
+            // The portable passes too (on a CPU with AVX2 the call above took the AVX2 ones).
+            let mut portable = start;
+            lower_best_over_portable(&pts, |j| names[j], p, &mut portable);
+            assert_eq!(portable, want, "portable, trial {trial}: {pts:?} from {p:?}, start {start:?}");
             changed += (got != start) as usize;
         }
         assert!(changed > 2000, "the cases should improve the bound: {changed}");

@@ -53,8 +53,7 @@ impl Frame {
     ///
     /// Row by row, with each column's and row's ray slope computed once (the same divisions
     /// [`Camera::unproject`] makes per pixel), so a hit costs its transform only: the same
-    /// points, bit for bit (the same products and sums in the same order as
-    /// [`Camera::to_object`]).
+    /// points, bit for bit (each through [`Camera::to_object`]).
     ///
     /// Each row is read in chunks of [`UNPROJECT_CHUNK`] pixels: a chunk without a hit (the
     /// background around the object, most of an image) is passed by with one vectorized test;
@@ -69,7 +68,8 @@ impl Frame {
         }
         let k = &self.camera.intrinsics;
         let qu: Vec<f64> = (0..w as u32).map(|u| k.pixel_ray(u, 0)[0]).collect();
-        let Camera { center: c, right: r, down: d, forward: f, .. } = self.camera;
+        // A local copy: its axes stay in registers across the rows.
+        let cam = self.camera;
         for (v, (depth, tri)) in self.depth.chunks_exact(w).zip(self.triangle.chunks_exact(w)).enumerate() {
             // A row without a hit adds nothing (and asks for no room).
             if tri.iter().fold(NO_HIT, |a, &t| a & t) == NO_HIT {
@@ -88,8 +88,7 @@ impl Frame {
                 }
                 for ((&z, &t), &qx) in zs.iter().zip(ts).zip(qs) {
                     let z = z as f64;
-                    let q = [qx * z, qv * z, z];
-                    room[n].write(std::array::from_fn(|i| c[i] + q[0] * r[i] + q[1] * d[i] + q[2] * f[i]));
+                    room[n].write(cam.to_object([qx * z, qv * z, z]));
                     n += (t != NO_HIT) as usize;
                 }
             }

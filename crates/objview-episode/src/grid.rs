@@ -240,21 +240,51 @@ pub(crate) fn lower_best_over(
     best: &mut (f64, u32),
 ) {
     #[cfg(target_arch = "x86_64")]
-    if pts.len() >= 4 && std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU has the feature `lower_best_over_avx2` is compiled for.
-        return unsafe { lower_best_over_avx2(pts, index, p, best) };
-    }
-    lower_best_over_portable(pts, index, p, best)
+    let avx2 = pts.len() >= 4 && std::arch::is_x86_feature_detected!("avx2");
+    #[cfg(not(target_arch = "x86_64"))]
+    let avx2 = false;
+    // SAFETY: `avx2` is set only where the CPU has the feature.
+    unsafe { lower_best_over_on(avx2, pts, index, p, best) }
 }
 
-/// [`lower_best_over`] without AVX2.
+/// [`lower_best_over`] with the AVX2 passes (`avx2`) or the portable ones.
+///
+/// # Safety
+/// With `avx2` set, the CPU must have AVX2.
 #[inline]
-pub(crate) fn lower_best_over_portable(
+unsafe fn lower_best_over_on(
+    avx2: bool,
     pts: &[[f64; 3]],
     index: impl Fn(usize) -> u32,
     p: [f64; 3],
     best: &mut (f64, u32),
 ) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: the CPU has AVX2 when `avx2` is set (this function's contract).
+    let min = if avx2 { unsafe { min_d2_avx2(pts, p) } } else { min_d2(pts, p) };
+    #[cfg(not(target_arch = "x86_64"))]
+    let min = {
+        let _ = avx2;
+        min_d2(pts, p)
+    };
+    // Nothing below the bound, or only ties with a bound that is not a point.
+    if min > best.0 || (min == best.0 && best.1 == NONE) {
+        return;
+    }
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: as above.
+    let at = if avx2 { unsafe { first_at_avx2(pts, &index, p, min) } } else { first_at(pts, &index, p, min) };
+    #[cfg(not(target_arch = "x86_64"))]
+    let at = first_at(pts, &index, p, min);
+    if min < best.0 || at < best.1 {
+        *best = (min, at);
+    }
+}
+
+/// The smallest [`dist2`] from `p` to the points (∞ for none), in four lanes that the compiler
+/// vectorizes (two to an SSE2 vector, on the interleaved coordinates).
+#[inline]
+fn min_d2(pts: &[[f64; 3]], p: [f64; 3]) -> f64 {
     const L: usize = 4;
     let mut m = [f64::INFINITY; L];
     let chunks = pts.chunks_exact(L);
@@ -270,19 +300,19 @@ pub(crate) fn lower_best_over_portable(
         let d = dist2(p, q);
         min = if d < min { d } else { min };
     }
-    // Nothing below the bound, or only ties with a bound that is not a point.
-    if min > best.0 || (min == best.0 && best.1 == NONE) {
-        return;
-    }
+    min
+}
+
+/// The smallest `index(j)` of the points at d² `min` from `p` (`u32::MAX` for none).
+#[inline]
+fn first_at(pts: &[[f64; 3]], index: impl Fn(usize) -> u32, p: [f64; 3], min: f64) -> u32 {
     let mut at = u32::MAX;
     for (j, &q) in pts.iter().enumerate() {
         if dist2(p, q) == min {
             at = at.min(index(j));
         }
     }
-    if min < best.0 || at < best.1 {
-        *best = (min, at);
-    }
+    at
 }
 
 /// The squared distances from `(px, py, pz)` to the four points whose coordinates start at `f`
@@ -312,10 +342,11 @@ unsafe fn dist2_x4(
     _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)), _mm256_mul_pd(dz, dz))
 }
 
-/// [`lower_best_over`] compiled for AVX2: both passes four points at a time ([`dist2_x4`]).
+/// [`min_d2`] compiled for AVX2: the whole groups of four points by [`dist2_x4`], the rest as
+/// [`min_d2`] takes them.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn lower_best_over_avx2(pts: &[[f64; 3]], index: impl Fn(usize) -> u32, p: [f64; 3], best: &mut (f64, u32)) {
+fn min_d2_avx2(pts: &[[f64; 3]], p: [f64; 3]) -> f64 {
     use std::arch::x86_64::*;
     let (px, py, pz) = (_mm256_set1_pd(p[0]), _mm256_set1_pd(p[1]), _mm256_set1_pd(p[2]));
     let full = pts.len() / 4 * 4;
@@ -330,18 +361,23 @@ fn lower_best_over_avx2(pts: &[[f64; 3]], index: impl Fn(usize) -> u32, p: [f64;
     let mut lanes = [0.0; 4];
     // SAFETY: `lanes` holds four f64.
     unsafe { _mm256_storeu_pd(lanes.as_mut_ptr(), m) };
-    let mut min = lanes.iter().fold(f64::INFINITY, |a, &b| if b < a { b } else { a });
-    for &q in &pts[full..] {
-        let d = dist2(p, q);
-        min = if d < min { d } else { min };
-    }
-    if min > best.0 || (min == best.0 && best.1 == NONE) {
-        return;
-    }
-    let mut at = u32::MAX;
+    let rest = min_d2(&pts[full..], p);
+    lanes.iter().fold(rest, |a, &b| if b < a { b } else { a })
+}
+
+/// [`first_at`] compiled for AVX2: the whole groups of four points by [`dist2_x4`], the rest as
+/// [`first_at`] takes them.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn first_at_avx2(pts: &[[f64; 3]], index: impl Fn(usize) -> u32, p: [f64; 3], min: f64) -> u32 {
+    use std::arch::x86_64::*;
+    let (px, py, pz) = (_mm256_set1_pd(p[0]), _mm256_set1_pd(p[1]), _mm256_set1_pd(p[2]));
+    let full = pts.len() / 4 * 4;
+    let flat = pts.as_flattened().as_ptr();
     let target = _mm256_set1_pd(min);
+    let mut at = first_at(&pts[full..], |j| index(full + j), p, min);
     for c in (0..full).step_by(4) {
-        // SAFETY: as above.
+        // SAFETY: points c..c + 4 lie within `pts`.
         let d = unsafe { dist2_x4(flat.add(3 * c), px, py, pz) };
         let mut hits = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_EQ_OQ>(d, target)) as u32;
         while hits != 0 {
@@ -349,14 +385,7 @@ fn lower_best_over_avx2(pts: &[[f64; 3]], index: impl Fn(usize) -> u32, p: [f64;
             hits &= hits - 1;
         }
     }
-    for (j, &q) in pts.iter().enumerate().skip(full) {
-        if dist2(p, q) == min {
-            at = at.min(index(j));
-        }
-    }
-    if min < best.0 || at < best.1 {
-        *best = (min, at);
-    }
+    at
 }
 
 /// Test helper: for 3,000 random keys in [−24, 24)³, what `for_cells_around(k)` shows must be
@@ -1731,9 +1760,11 @@ mod tests {
             let names: Vec<u32> = (0..n as u32).rev().collect();
             let start = if trial % 2 == 0 { (f64::INFINITY, NONE) } else { (dist2(p, pts[n / 2]), NONE) };
             let (mut a, mut b) = (start, start);
-            // SAFETY: the CPU has AVX2.
-            unsafe { lower_best_over_avx2(&pts, |j| names[j], p, &mut a) };
-            lower_best_over_portable(&pts, |j| names[j], p, &mut b);
+            // SAFETY: the CPU has AVX2 (checked above); the portable passes need nothing.
+            unsafe {
+                lower_best_over_on(true, &pts, |j| names[j], p, &mut a);
+                lower_best_over_on(false, &pts, |j| names[j], p, &mut b);
+            }
             assert_eq!((a.0.to_bits(), a.1), (b.0.to_bits(), b.1), "trial {trial}");
         }
     }
@@ -1788,7 +1819,8 @@ mod tests {
             assert_eq!(got, want, "trial {trial}: {pts:?} from {p:?}, start {start:?}");
             // The portable passes too (on a CPU with AVX2 the call above took the AVX2 ones).
             let mut portable = start;
-            lower_best_over_portable(&pts, |j| names[j], p, &mut portable);
+            // SAFETY: the portable passes need no CPU feature.
+            unsafe { lower_best_over_on(false, &pts, |j| names[j], p, &mut portable) };
             assert_eq!(portable, want, "portable, trial {trial}: {pts:?} from {p:?}, start {start:?}");
             changed += (got != start) as usize;
         }

@@ -359,16 +359,10 @@ impl Coverage {
         }
         sc.cand.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         let epoch = fused.epoch();
-        // The fused blocks around this target block (3×3×3, by block offset): a target with an
-        // occupied voxel among those of its neighbourhood that lie entirely within τ_min of it
-        // ([`Index::near`]) retires at once, with no search.
-        let around: [Option<&FusedBlock>; 27] = std::array::from_fn(|b| {
-            let o = near_offset(b as u32);
-            domain
-                .block_index([key[0] + o[0], key[1] + o[1], key[2] + o[2]])
-                .and_then(|bi| fused.block_at(bi))
-        });
-        // Their occupancy as rows along x, made when the first target needs it.
+        // The occupancy of the fused blocks around this target block (3×3×3) as rows along x,
+        // made when the first target needs it (most blocks an update visits have none that
+        // does): a target with an occupied voxel among those of its neighbourhood that lie
+        // entirely within τ_min of it ([`Index::near`]) retires at once, with no search.
         let mut rows: Option<NeighbourRows> = None;
         sc.who.clear();
         sc.best.clear();
@@ -400,7 +394,7 @@ impl Coverage {
                     continue;
                 }
             }
-            let rows = rows.get_or_insert_with(|| NeighbourRows::new(&around));
+            let rows = rows.get_or_insert_with(|| NeighbourRows::of_block(domain, fused, key));
             if rows.any_occupied(li, self.ix.near[iu]) {
                 // Within τ_min of that voxel's point, for good: covered at every τ.
                 out.push(Change { target: i, d2: 0.0, nn: NONE, retire: true });
@@ -509,7 +503,7 @@ impl Coverage {
 }
 
 /// The offset (−1, 0 or 1 per axis) of bit `b` of [`Index::near`] (inverse of [`near_bit`]).
-#[inline]
+#[cfg(test)]
 fn near_offset(b: u32) -> [i32; 3] {
     [(b % 3) as i32 - 1, (b / 3 % 3) as i32 - 1, (b / 9) as i32 - 1]
 }
@@ -526,6 +520,24 @@ struct NeighbourRows {
 const ROWS: usize = BLOCK as usize + 2;
 
 impl NeighbourRows {
+    /// The occupancy around the target block with key `key`: [`NeighbourRows::new`] of the
+    /// fused blocks of its 3×3×3 block neighbourhood.
+    fn of_block(domain: &Domain, fused: &FusedCloud, key: [i32; 3]) -> NeighbourRows {
+        // Offsets in `near_bit` order: x fastest.
+        let mut around: [Option<&FusedBlock>; 27] = [None; 27];
+        let mut slot = around.iter_mut();
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    *slot.next().expect("27 offsets") = domain
+                        .block_index([key[0] + dx, key[1] + dy, key[2] + dz])
+                        .and_then(|bi| fused.block_at(bi));
+                }
+            }
+        }
+        NeighbourRows::new(&around)
+    }
+
     /// The occupancy around the middle block of `around` (the fused blocks of the 3×3×3
     /// block neighbourhood, by [`near_bit`] of the block offset).
     fn new(around: &[Option<&FusedBlock>; 27]) -> NeighbourRows {
@@ -553,16 +565,22 @@ impl NeighbourRows {
         if mask == 0 {
             return false;
         }
+        self.around(li) & mask != 0
+    }
+
+    /// The occupancy of the 27 fine voxels around the one with local index `li`: bit
+    /// [`near_bit`] of the offset. Rows y − 1..=y + 1 and z − 1..=z + 1 are
+    /// `rows[z..=z + 2][y..=y + 2]`, voxels x − 1..=x + 1 their bits x..=x + 2.
+    #[inline]
+    fn around(&self, li: usize) -> u32 {
         let [x, y, z] = local_coords(li);
-        // Bit near_bit(d) of `occupied` for the voxel at offset d: rows y − 1..=y + 1 and
-        // z − 1..=z + 1 are rows[z..=z + 2][y..=y + 2], voxels x − 1..=x + 1 their bits x..=x + 2.
         let mut occupied = 0u32;
         for dz in 0..3 {
             for dy in 0..3 {
                 occupied |= ((self.rows[z + dz][y + dy] >> x) as u32 & 7) << (3 * (dy + 3 * dz));
             }
         }
-        occupied & mask != 0
+        occupied
     }
 }
 
@@ -697,6 +715,56 @@ mod tests {
                 assert_eq!(retired_with(&[face, edge]), 1, "axis {a}, voxel {k:?}");
                 // The edge point alone: covered, not for good.
                 assert_eq!(retired_with(&[edge]), 0, "axis {a}, voxel {k:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn neighbour_rows_give_each_voxels_27_neighbours() {
+        // Random occupancy of the 27 blocks around a middle block (some absent): for every voxel
+        // of the middle block, each of its 27 neighbours' bits against a lookup of that voxel
+        // in the blocks themselves.
+        let domain = Domain::covering(0.005, [-0.2; 3], [0.2; 3], 0.05);
+        let n = crate::grid::BLOCK;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        for round in 0..4 {
+            let mut pts = Vec::new();
+            for b in 0..27u32 {
+                if round > 0 && rng.gen_bool(0.2) {
+                    continue;
+                }
+                let o = near_offset(b);
+                for li in 0..crate::grid::BLOCK_CELLS {
+                    if rng.gen_bool(0.3) {
+                        let [x, y, z] = local_coords(li);
+                        let k = [o[0] * n + x as i32, o[1] * n + y as i32, o[2] * n + z as i32];
+                        pts.push(k.map(|c| (c as f64 + 0.5) * 0.005));
+                    }
+                }
+            }
+            let mut fused = FusedCloud::new(domain.clone());
+            fused.insert(&pts);
+            let rows = NeighbourRows::of_block(&domain, &fused, [0; 3]);
+            let occupied = |k: [i32; 3]| {
+                let bk = crate::grid::block_of(k);
+                domain
+                    .block_index(bk)
+                    .and_then(|bi| fused.block_at(bi))
+                    .is_some_and(|fb| fb.is_occupied(local_index(k)))
+            };
+            for bit in 0..27u32 {
+                assert_eq!(near_bit(near_offset(bit)), bit);
+            }
+            for li in 0..crate::grid::BLOCK_CELLS {
+                let [x, y, z] = local_coords(li).map(|c| c as i32);
+                let got = rows.around(li);
+                for bit in 0..27u32 {
+                    let d = near_offset(bit);
+                    let want = occupied([x + d[0], y + d[1], z + d[2]]);
+                    assert_eq!(got >> bit & 1 == 1, want, "round {round}, voxel {li}, offset {d:?}");
+                    assert_eq!(rows.any_occupied(li, 1 << bit), want);
+                }
+                assert_eq!(got >> 27, 0);
             }
         }
     }

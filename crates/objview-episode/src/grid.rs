@@ -1339,15 +1339,27 @@ impl ChangedBlocks {
         let side = reach.saturating_mul(2).saturating_add(1);
         let volume = side.saturating_mul(side).saturating_mul(side);
         if volume < self.blocks.len() as i64 {
+            // The box around `tb` clipped to the domain once (offsets per axis), the lookup's
+            // index by strides, and `block_box_dist2`'s gaps per offset (its sum in its order):
+            // the same entries as one `block_index` and `block_box_dist2` per block.
             let r = reach as i32;
-            for dz in -r..=r {
-                for dy in -r..=r {
-                    for dx in -r..=r {
-                        let b = [tb[0] + dx, tb[1] + dy, tb[2] + dz];
-                        let Some(bi) = domain.block_index(b) else { continue };
-                        let gi = self.lookup[bi];
+            let rel: [i32; 3] = std::array::from_fn(|a| tb[a] - domain.lo[a]);
+            let span: [(i32, i32); 3] =
+                std::array::from_fn(|a| ((-r).max(-rel[a]), r.min(domain.dims[a] - 1 - rel[a])));
+            let gap2 = |d: i32| {
+                let gap = ((d.abs() - 1).max(0)) as f64 * e;
+                gap * gap
+            };
+            for dz in span[2].0..=span[2].1 {
+                let gz = gap2(dz);
+                for dy in span[1].0..=span[1].1 {
+                    let gy = gap2(dy);
+                    let row =
+                        (domain.dims[0] * ((rel[1] + dy) + domain.dims[1] * (rel[2] + dz)) + rel[0]) as isize;
+                    for dx in span[0].0..=span[0].1 {
+                        let gi = self.lookup[(row + dx as isize) as usize];
                         if gi != NONE {
-                            let lb = block_box_dist2(domain, tb, b);
+                            let lb = (gap2(dx) + gy) + gz;
                             if lb < max_d2 {
                                 out.push((lb, gi as usize));
                             }
@@ -1965,5 +1977,44 @@ mod tests {
         assert_eq!(out, vec![(0.0, NONE); 2]);
         nearest_in_block(&fused, &[], 1.0, &mut scratch, &mut out);
         assert!(out.is_empty());
+    }
+
+    #[test]
+    fn candidate_groups_are_every_group_within_reach() {
+        // Groups in most blocks of a small domain: for target blocks inside, on the edges and
+        // outside it, and radii whose box takes the dense lookup (reach 1–3) or the scan of all
+        // groups (∞), the candidates are exactly the groups whose block cube is closer than the
+        // radius, with `block_box_dist2`'s value bit for bit.
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        let domain = Domain::covering(0.005, [-0.2; 3], [0.2; 3], 0.05);
+        let pts: Vec<[f64; 3]> =
+            (0..4000).map(|_| std::array::from_fn(|_| rng.gen_range(-0.24..0.24))).collect();
+        let mut fused = FusedCloud::new(domain.clone());
+        fused.insert(&pts);
+        let groups = ChangedBlocks::new(&fused, &fused.latest_changed());
+        assert!(groups.blocks.len() > 343, "{} groups", groups.blocks.len());
+        let mut out = Vec::new();
+        for max_d2 in [0.03f64 * 0.03, 0.04 * 0.04, 0.05 * 0.05, 0.1 * 0.1, f64::INFINITY] {
+            for z in domain.lo[2] - 2..domain.lo[2] + domain.dims[2] + 2 {
+                for y in [domain.lo[1] - 1, domain.lo[1], domain.lo[1] + 4, domain.lo[1] + domain.dims[1] - 1]
+                {
+                    for x in domain.lo[0] - 1..domain.lo[0] + domain.dims[0] + 1 {
+                        let tb = [x, y, z];
+                        out.clear();
+                        groups.candidates(&domain, tb, max_d2, &mut out);
+                        out.sort_by_key(|a| a.1);
+                        let want: Vec<(f64, usize)> = groups
+                            .blocks
+                            .iter()
+                            .enumerate()
+                            .map(|(gi, g)| (block_box_dist2(&domain, tb, g.key), gi))
+                            .filter(|&(lb, _)| lb < max_d2)
+                            .collect();
+                        assert_eq!(out, want, "block {tb:?}, max d² {max_d2}");
+                    }
+                }
+            }
+        }
     }
 }

@@ -265,7 +265,10 @@ impl Coverage {
             .enumerate()
             .with_min_len(16)
             .fold(
-                || (Scratch::default(), Vec::new(), Vec::new()),
+                // The scratch boxed: rayon moves the accumulator through every step of the fold,
+                // and a pointer moves in registers where the buffers' headers took two memcpy
+                // calls per target block.
+                || (Box::<Scratch>::default(), Vec::new(), Vec::new()),
                 |(mut sc, mut out, mut retired_in), (at, &tb)| {
                     if let Some(&next) = this.live_blocks.get(at + 1) {
                         this.prefetch_block(next);

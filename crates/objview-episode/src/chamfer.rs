@@ -453,12 +453,15 @@ impl Targets {
                 let k = [0, 1, 2].map(|a| base[a] + l[a] as i32);
                 let mut best = f64::INFINITY;
                 ix.for_filled_runs_in_box(k.map(|x| x - 1), k.map(|x| x + 1), |lo, hi| {
-                    for i in lo as usize..hi as usize {
-                        let d = dist2(ix.pts[i], p);
+                    // The run as slices (one bounds check per run, not three per target).
+                    let r = lo as usize..hi as usize;
+                    let (d2s, nns) = (&mut self.d2[r.clone()], &mut self.nn[r.clone()]);
+                    for ((&q, d2), nn) in ix.pts[r].iter().zip(d2s).zip(nns) {
+                        let d = dist2(q, p);
                         best = best.min(d);
-                        if d < self.d2[i] || (d == self.d2[i] && s < self.nn[i]) {
-                            self.d2[i] = d;
-                            self.nn[i] = s;
+                        if d < *d2 || (d == *d2 && s < *nn) {
+                            *d2 = d;
+                            *nn = s;
                         }
                     }
                 });
@@ -466,8 +469,8 @@ impl Targets {
                 // `near2_ring2` (fused → target only: the targets' pairs are complete).
                 if best >= near2 {
                     ix.for_filled_runs_in_box(k.map(|x| x - 2), k.map(|x| x + 2), |lo, hi| {
-                        for i in lo as usize..hi as usize {
-                            best = best.min(dist2(ix.pts[i], p));
+                        for &q in &ix.pts[lo as usize..hi as usize] {
+                            best = best.min(dist2(q, p));
                         }
                     });
                 }

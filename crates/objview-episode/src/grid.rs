@@ -1350,6 +1350,25 @@ impl ChangedBlocks {
                 let gap = ((d.abs() - 1).max(0)) as f64 * e;
                 gap * gap
             };
+            if r <= 1 {
+                // Neighbouring blocks touch: every gap is 0 (the common case, τ_max below a
+                // block's edge).
+                if 0.0 < max_d2 {
+                    for dz in span[2].0..=span[2].1 {
+                        for dy in span[1].0..=span[1].1 {
+                            let row = (domain.dims[0] * ((rel[1] + dy) + domain.dims[1] * (rel[2] + dz))
+                                + rel[0]) as isize;
+                            for dx in span[0].0..=span[0].1 {
+                                let gi = self.lookup[(row + dx as isize) as usize];
+                                if gi != NONE {
+                                    out.push((0.0, gi as usize));
+                                }
+                            }
+                        }
+                    }
+                }
+                return;
+            }
             for dz in span[2].0..=span[2].1 {
                 let gz = gap2(dz);
                 for dy in span[1].0..=span[1].1 {
@@ -1995,7 +2014,7 @@ mod tests {
         let groups = ChangedBlocks::new(&fused, &fused.latest_changed());
         assert!(groups.blocks.len() > 343, "{} groups", groups.blocks.len());
         let mut out = Vec::new();
-        for max_d2 in [0.03f64 * 0.03, 0.04 * 0.04, 0.05 * 0.05, 0.1 * 0.1, f64::INFINITY] {
+        for max_d2 in [0.0, 1e-12, 0.03f64 * 0.03, 0.04 * 0.04, 0.05 * 0.05, 0.1 * 0.1, f64::INFINITY] {
             for z in domain.lo[2] - 2..domain.lo[2] + domain.dims[2] + 2 {
                 for y in [domain.lo[1] - 1, domain.lo[1], domain.lo[1] + 4, domain.lo[1] + domain.dims[1] - 1]
                 {

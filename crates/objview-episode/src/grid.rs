@@ -1346,29 +1346,13 @@ impl ChangedBlocks {
             let rel: [i32; 3] = std::array::from_fn(|a| tb[a] - domain.lo[a]);
             let span: [(i32, i32); 3] =
                 std::array::from_fn(|a| ((-r).max(-rel[a]), r.min(domain.dims[a] - 1 - rel[a])));
+            // Within one block of `tb` every block touches it: all gaps 0 (the common case, τ_max
+            // below a block's edge), not computed.
+            let touching = r <= 1;
             let gap2 = |d: i32| {
                 let gap = ((d.abs() - 1).max(0)) as f64 * e;
                 gap * gap
             };
-            if r <= 1 {
-                // Neighbouring blocks touch: every gap is 0 (the common case, τ_max below a
-                // block's edge).
-                if 0.0 < max_d2 {
-                    for dz in span[2].0..=span[2].1 {
-                        for dy in span[1].0..=span[1].1 {
-                            let row = (domain.dims[0] * ((rel[1] + dy) + domain.dims[1] * (rel[2] + dz))
-                                + rel[0]) as isize;
-                            for dx in span[0].0..=span[0].1 {
-                                let gi = self.lookup[(row + dx as isize) as usize];
-                                if gi != NONE {
-                                    out.push((0.0, gi as usize));
-                                }
-                            }
-                        }
-                    }
-                }
-                return;
-            }
             for dz in span[2].0..=span[2].1 {
                 let gz = gap2(dz);
                 for dy in span[1].0..=span[1].1 {
@@ -1378,7 +1362,7 @@ impl ChangedBlocks {
                     for dx in span[0].0..=span[0].1 {
                         let gi = self.lookup[(row + dx as isize) as usize];
                         if gi != NONE {
-                            let lb = (gap2(dx) + gy) + gz;
+                            let lb = if touching { 0.0 } else { (gap2(dx) + gy) + gz };
                             if lb < max_d2 {
                                 out.push((lb, gi as usize));
                             }

@@ -6,7 +6,7 @@
 //! v2 feature, is unstable in rustc and not enabled, so not checked), because the
 //! hot paths count bits everywhere — the fusion's ranks in its occupancy words, the coverage and
 //! cover searches' bitsets — and the generic x86-64 target has no POPCNT instruction, so each
-//! `count_ones` became a dozen instructions (README, Performance, "The x86-64-v2 baseline").
+//! `count_ones` became a dozen instructions (`docs/performance.md`, "The x86-64-v2 baseline").
 //! Results do not depend on it (no floating-point operation changes; tested with the golden
 //! outputs and the learned planners' training). A CPU without these instructions would stop at the first one with SIGILL
 //! somewhere deep in a run; [`missing_baseline`] lets the binary say so in one line instead.

@@ -4,7 +4,7 @@
 //! it is not an image (the PNG is compressed already). Every other response — no such header,
 //! a small body, an image — goes out as it is. Responses that may be compressed carry
 //! `Vary: Accept-Encoding` either way. The depth NPY (1 MiB of `<f4`, mostly background zeros)
-//! is what gains: see the README's server figures.
+//! is what gains: see the server figures in `docs/performance.md`.
 //!
 //! Every body of [`crate::api`] is produced whole before it is sent, so compressing it whole
 //! changes no timing a client sees beyond the compression itself; bodies over

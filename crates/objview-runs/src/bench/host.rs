@@ -2,7 +2,7 @@
 //! hot paths select at run time. Every `objview bench` prints it as its first line and records
 //! it in its `--json`, because timings only compare on the same kind of CPU: on 2026-12-05 the
 //! same build rendered the 98k-triangle `mug` in 3.4 ms on an AMD EPYC VM and in ~1.9 ms on an
-//! Intel one, until the renderer stopped using masked stores (README, "Masked stores on AMD").
+//! Intel one, until the renderer stopped using masked stores (`docs/performance.md`, "Masked stores on AMD").
 //! Benchmark figures are wall-clock measurements and never byte-identical, so naming the host
 //! here costs no reproducibility (the result files of runs and annotations stay host-free).
 

@@ -1116,10 +1116,17 @@ pub(crate) fn block_box_dist2(d: &Domain, a: [i32; 3], b: [i32; 3]) -> f64 {
     let e = d.h * BLOCK as f64;
     let mut s = 0.0;
     for ax in 0..3 {
-        let gap = ((a[ax] - b[ax]).abs() - 1).max(0) as f64 * e;
-        s += gap * gap;
+        s += block_gap2(a[ax] - b[ax], e);
     }
     s
+}
+
+/// The squared gap along one axis between two block boxes `offset` blocks apart (block edge
+/// `e`): [`block_box_dist2`] is the sum of the three axes' gaps, in axis order.
+#[inline]
+fn block_gap2(offset: i32, e: f64) -> f64 {
+    let gap = (offset.abs() - 1).max(0) as f64 * e;
+    gap * gap
 }
 
 /// Lanes of the vectorized nearest scan.
@@ -1340,8 +1347,9 @@ impl ChangedBlocks {
         let volume = side.saturating_mul(side).saturating_mul(side);
         if volume < self.blocks.len() as i64 {
             // The box around `tb` clipped to the domain once (offsets per axis), the lookup's
-            // index by strides, and `block_box_dist2`'s gaps per offset (its sum in its order):
-            // the same entries as one `block_index` and `block_box_dist2` per block.
+            // index by strides, and each axis's gap per offset (`block_gap2`, summed in
+            // `block_box_dist2`'s order): the same entries as one `block_index` and
+            // `block_box_dist2` per block.
             let r = reach as i32;
             let rel: [i32; 3] = std::array::from_fn(|a| tb[a] - domain.lo[a]);
             let span: [(i32, i32); 3] =
@@ -1349,20 +1357,16 @@ impl ChangedBlocks {
             // Within one block of `tb` every block touches it: all gaps 0 (the common case, τ_max
             // below a block's edge), not computed.
             let touching = r <= 1;
-            let gap2 = |d: i32| {
-                let gap = ((d.abs() - 1).max(0)) as f64 * e;
-                gap * gap
-            };
             for dz in span[2].0..=span[2].1 {
-                let gz = gap2(dz);
+                let gz = block_gap2(dz, e);
                 for dy in span[1].0..=span[1].1 {
-                    let gy = gap2(dy);
+                    let gy = block_gap2(dy, e);
                     let row =
                         (domain.dims[0] * ((rel[1] + dy) + domain.dims[1] * (rel[2] + dz)) + rel[0]) as isize;
                     for dx in span[0].0..=span[0].1 {
                         let gi = self.lookup[(row + dx as isize) as usize];
                         if gi != NONE {
-                            let lb = if touching { 0.0 } else { (gap2(dx) + gy) + gz };
+                            let lb = if touching { 0.0 } else { (block_gap2(dx, e) + gy) + gz };
                             if lb < max_d2 {
                                 out.push((lb, gi as usize));
                             }
